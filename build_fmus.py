@@ -1,0 +1,42 @@
+#!/usr/bin/env python3
+"""Build every boomfmi FMU into build/fmus/ (and, as the SSP lands, build/*.ssp).
+
+    python build_fmus.py [--out build] [NAME ...]
+
+Each FMU is self-contained (its physics bundled under a private name), carries SI
+units, bounds and output dependencies, and passes fmpy.validation.validate_fmu.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE / "src"))
+
+from boomfmi.fmubuild import BuildError, build_fmu  # noqa: E402
+
+FMU_NAMES = ("valve", "cylinder", "boom_load", "force_estimator")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("names", nargs="*", default=list(FMU_NAMES), help="FMUs to build (default: all)")
+    parser.add_argument("--out", type=Path, default=HERE / "build", help="output folder (default: build/)")
+    args = parser.parse_args(argv)
+    unknown = sorted(set(args.names) - set(FMU_NAMES))
+    if unknown:
+        parser.error(f"unknown FMU(s): {', '.join(unknown)}; known: {', '.join(FMU_NAMES)}")
+    try:
+        for name in args.names:
+            path = build_fmu(HERE / "fmus" / name, args.out / "fmus")
+            print(f"built {path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path}")
+    except BuildError as e:
+        print(f"build_fmus.py: {e}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,69 @@
+"""boom_load: the boom's load, friction and end stops as an FMI 2.0 co-simulation FMU.
+
+Inputs the absolute chamber pressures and an external force along the cylinder axis;
+outputs the piston's position and velocity (its states), the boom angle alpha and the
+cylinder angle phi (Eq. 8 to 12).  Within a step the pressures and f_ext are held; the
+motion is integrated in short substeps with the exact stick/slip rule of
+``physics.load``, and x never leaves [0, L].
+"""
+from boomfmi_boom_load_lib.fmislave import BoomSlave, input, output, parameter
+from boomfmi_boom_load_lib.physics import (Cylinder, Geometry, Load, ParameterError, advance_load,
+                                           alpha_from_x, check_geometry, check_load, phi_from_x)
+from boomfmi_boom_load_lib.physics import reference_rig as rig
+from boomfmi_boom_load_lib.physics.validation import require_positive
+
+
+class BoomLoad(BoomSlave):
+    description = "Boom load with static/Coulomb/viscous friction and hard end stops (paper Eq. 8 to 12)"
+    variables = (
+        input("p_a", rig.P_atm, "Pa", "absolute pressure in chamber A (cap side)", min=0.0),
+        input("p_b", rig.P_atm, "Pa", "absolute pressure in chamber B (rod side)", min=0.0),
+        input("f_ext", 0.0, "N", "external force on the piston along the cylinder axis, positive against extension"),
+        output("x", 0.0, "m", "piston position, 0 = fully retracted", min=0.0),
+        output("v", 0.0, "m/s", "piston velocity, positive extending"),
+        output("alpha", 0.0, "rad", "boom angle (Eq. 12)"),
+        output("phi", 0.0, "rad", "angle between the cylinder axis and the horizontal (Eq. 10)"),
+        parameter("K_v", rig.K_v, "N.s/m", "viscous friction coefficient", min=0.0),
+        parameter("F_s", rig.F_s, "N", "static friction force", min=0.0),
+        parameter("F_d", rig.F_d, "N", "Coulomb friction force", min=0.0),
+        parameter("F_L", rig.F_L, "N", "load force from the backhoe's weight, acting as F_L sin(phi)"),
+        parameter("M", rig.M, "kg", "moving mass reduced to the piston", min=0.0),
+        parameter("a", rig.a, "m", "boom geometry a (Eq. 10, 12)", min=0.0),
+        parameter("b", rig.b, "m", "boom geometry b (Eq. 10, 12)", min=0.0),
+        parameter("h", rig.h, "m", "boom geometry h (Eq. 10)", min=0.0),
+        parameter("l_min", rig.l_min, "m", "cylinder length at x = 0 (Eq. 11)", min=0.0),
+        parameter("L", rig.L, "m", "stroke", min=0.0),
+        parameter("A_a", rig.A_a, "m2", "cap-side piston area", min=0.0),
+        parameter("A_b", rig.A_b, "m2", "rod-side annulus area", min=0.0),
+        parameter("P_atm", rig.P_atm, "Pa", "atmospheric pressure acting on the rod", min=0.0),
+        parameter("x0", 0.0, "m", "initial piston position", min=0.0),
+    )
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.modelName = "boom_load"
+        self._cyl, self._geom, self._load = Cylinder(), Geometry(), Load()
+
+    def setup(self):
+        self._load = Load(K_v=self.K_v, F_s=self.F_s, F_d=self.F_d, F_L=self.F_L, M=self.M)
+        self._geom = Geometry(a=self.a, b=self.b, h=self.h, l_min=self.l_min)
+        self._cyl = Cylinder(A_a=self.A_a, A_b=self.A_b, L=self.L)
+        check_load(self._load)
+        for name in ("L", "A_a", "A_b", "P_atm"):
+            require_positive(name, getattr(self, name))
+        check_geometry(self._geom, self.L)
+        if not 0.0 <= self.x0 <= self.L:
+            raise ParameterError("x0", self.x0, f"must lie within the stroke [0, {self.L:g}] m")
+        self.x, self.v = float(self.x0), 0.0
+
+    @property
+    def alpha(self):
+        return alpha_from_x(self.x, self._geom)
+
+    @property
+    def phi(self):
+        return phi_from_x(self.x, self._geom)
+
+    def step(self, t, dt):
+        self.x, self.v = advance_load(self.x, self.v, dt, self.p_a, self.p_b, self.f_ext,
+                                      self._cyl, self._geom, self._load, self.P_atm)

@@ -1,0 +1,64 @@
+"""cylinder: the chambers of the DSNU 32-60 cylinder as an FMI 2.0 co-simulation FMU.
+
+Inputs the mass flows into each chamber and the piston's position and velocity;
+outputs the absolute chamber pressures, its states (Eq. 5 to 7).  Within a
+communication step the flows are held and the piston moves linearly with the input
+velocity; the energy balance of Eq. 4 is then integrated exactly, so the step is
+stable for any step size.
+"""
+from boomfmi_cylinder_lib.fmislave import BoomSlave, input, output, parameter
+from boomfmi_cylinder_lib.physics import (Cylinder as CylinderParams, Gas, ParameterError,
+                                          chamber_pressure_step, chamber_volumes, check_cylinder,
+                                          check_gas)
+from boomfmi_cylinder_lib.physics import reference_rig as rig
+
+
+class Cylinder(BoomSlave):
+    description = "Pneumatic cylinder chambers: isentropic pressure dynamics (paper Eq. 5 to 7)"
+    variables = (
+        input("mdot_a", 0.0, "kg/s", "mass flow into chamber A"),
+        input("mdot_b", 0.0, "kg/s", "mass flow into chamber B"),
+        input("x", 0.0, "m", "piston position, 0 = fully retracted", min=0.0),
+        input("v", 0.0, "m/s", "piston velocity, positive extending"),
+        output("p_a", rig.P_atm, "Pa", "absolute pressure in chamber A (cap side)", min=0.0),
+        output("p_b", rig.P_atm, "Pa", "absolute pressure in chamber B (rod side)", min=0.0),
+        parameter("A_a", rig.A_a, "m2", "cap-side piston area", min=0.0),
+        parameter("A_b", rig.A_b, "m2", "rod-side annulus area", min=0.0),
+        parameter("L", rig.L, "m", "stroke", min=0.0),
+        parameter("V_a0", rig.V_a0, "m3", "dead volume of chamber A incl. port and hose", min=0.0),
+        parameter("V_b0", rig.V_b0, "m3", "dead volume of chamber B incl. port and hose", min=0.0),
+        parameter("k", rig.k, "1", "ratio of specific heats of air", min=1.0),
+        parameter("R", rig.R, "J/(kg.K)", "specific gas constant of air", min=0.0),
+        parameter("T", rig.T, "K", "air temperature", min=0.0),
+        parameter("p_a0", rig.P_atm, "Pa", "initial absolute pressure in chamber A", min=0.0),
+        parameter("p_b0", rig.P_atm, "Pa", "initial absolute pressure in chamber B", min=0.0),
+    )
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.modelName = "cylinder"
+        self._cyl, self._gas = CylinderParams(), Gas()
+
+    def setup(self):
+        self._cyl = CylinderParams(A_a=self.A_a, A_b=self.A_b, L=self.L, V_a0=self.V_a0, V_b0=self.V_b0)
+        self._gas = Gas(k=self.k, R=self.R, T=self.T)
+        check_cylinder(self._cyl)
+        check_gas(self._gas)
+        for name in ("p_a0", "p_b0"):
+            if not getattr(self, name) > 0.0:
+                raise ParameterError(name, getattr(self, name), "an absolute pressure must be > 0")
+        self.p_a, self.p_b = self.p_a0, self.p_b0
+
+    def step(self, t, dt):
+        L = self._cyl.L
+        x_0 = min(max(self.x, 0.0), L)
+        x_1 = min(max(x_0 + self.v * dt, 0.0), L)
+        V_a0, V_b0 = chamber_volumes(x_0, self._cyl)
+        V_a1, V_b1 = chamber_volumes(x_1, self._cyl)
+        p_a = chamber_pressure_step(self.p_a, V_a0, V_a1, self.mdot_a, dt, self._gas)
+        p_b = chamber_pressure_step(self.p_b, V_b0, V_b1, self.mdot_b, dt, self._gas)
+        if not (p_a > 0.0 and p_b > 0.0):
+            raise ValueError(
+                f"a chamber emptied (p_a = {p_a:g} Pa, p_b = {p_b:g} Pa): the outflow "
+                f"exceeds the air in the chamber; reduce the communication step")
+        self.p_a, self.p_b = p_a, p_b

@@ -1,0 +1,63 @@
+"""valve: the proportional valve MPYE-5-1/4-010B as an FMI 2.0 co-simulation FMU.
+
+Inputs u [V] and the absolute chamber pressures; outputs the mass flows into each
+chamber through the ports that the command opens (Eq. 1, standard form, and the
+reference rig's routing and A(u)).  The flows depend directly on the inputs; the FMU
+has no state.
+"""
+from boomfmi_valve_lib.fmislave import BoomSlave, input, output, parameter
+from boomfmi_valve_lib.physics import Gas, Valve as ValveParams, chamber_flows, check_gas, check_valve
+from boomfmi_valve_lib.physics import reference_rig as rig
+
+
+class Valve(BoomSlave):
+    description = "Proportional 5/3 valve: orifice mass flows into chambers A and B (paper Eq. 1)"
+    variables = (
+        input("u", rig.u_centre, "V", "valve command; 5 V closes every port, below 5 V supply -> A (extend), above 5 V supply -> B (retract)", min=0.0, max=10.0),
+        input("p_a", rig.P_atm, "Pa", "absolute pressure in chamber A (cap side)", min=0.0),
+        input("p_b", rig.P_atm, "Pa", "absolute pressure in chamber B (rod side)", min=0.0),
+        output("mdot_a", 0.0, "kg/s", "mass flow into chamber A (negative when A exhausts)", depends=("u", "p_a", "p_b")),
+        output("mdot_b", 0.0, "kg/s", "mass flow into chamber B (negative when B exhausts)", depends=("u", "p_a", "p_b")),
+        parameter("P_s", rig.P_s, "Pa", "supply pressure, absolute", min=0.0),
+        parameter("P_e", rig.P_e, "Pa", "exhaust pressure, absolute", min=0.0),
+        parameter("A_max", rig.A_max, "m2", "orifice area of each port at full opening", min=0.0),
+        parameter("T", rig.T, "K", "air temperature", min=0.0),
+        parameter("k", rig.k, "1", "ratio of specific heats of air", min=1.0),
+        parameter("R", rig.R, "J/(kg.K)", "specific gas constant of air", min=0.0),
+    )
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.modelName = "valve"
+        self._valve, self._gas = ValveParams(), Gas()
+        self._key = None
+        self._flows = (0.0, 0.0)
+
+    def setup(self):
+        self._valve = ValveParams(A_max=self.A_max, P_s=self.P_s, P_e=self.P_e)
+        self._gas = Gas(k=self.k, R=self.R, T=self.T)
+        check_valve(self._valve)
+        check_gas(self._gas)
+        self._key = None
+
+    def _current_flows(self):
+        key = (self.u, self.p_a, self.p_b)
+        if key != self._key:
+            if not (self.p_a > 0.0 and self.p_b > 0.0):
+                self.fail(f"input pressures must be > 0 Pa absolute, got p_a = {self.p_a!r}, p_b = {self.p_b!r}")
+                self._flows = (0.0, 0.0)
+            else:
+                self._flows = chamber_flows(self.u, self.p_a, self.p_b, self._valve, self._gas)
+            self._key = key
+        return self._flows
+
+    @property
+    def mdot_a(self):
+        return self._current_flows()[0]
+
+    @property
+    def mdot_b(self):
+        return self._current_flows()[1]
+
+    def step(self, t, dt):
+        pass  # no state: the flows follow the inputs at every communication point

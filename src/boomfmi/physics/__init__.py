@@ -1,0 +1,28 @@
+"""The boom's physics, once: plain functions on floats and NumPy arrays, SI units.
+
+Every caller (the FMUs, the monolithic reference solver, the virtual rig,
+identification and diagnosis) uses these functions.  Only relative imports are used
+inside this package, so that ``build_fmus.py`` can bundle it into each FMU under a
+name of that FMU's own.
+"""
+from . import reference_rig
+from .chamber import chamber_pressure_step, chamber_volumes, pressure_rates
+from .force_estimation import pneumatic_stiffness, position_error_force, reflected_force
+from .geometry import alpha_from_x, check_geometry, cylinder_length, phi_from_x, x_from_alpha
+from .load import (acceleration, advance_load, drive_force, friction_force, piston_force,
+                   slide_or_stick)
+from .orifice import critical_pressure_ratio, mass_flow, signed_mass_flow
+from .params import (Cylinder, Gas, Geometry, Load, Valve, check_cylinder, check_gas,
+                     check_load, check_valve)
+from .validation import ParameterError
+from .valve import chamber_flows, orifice_area
+
+__all__ = [
+    "reference_rig", "chamber_pressure_step", "chamber_volumes", "pressure_rates",
+    "pneumatic_stiffness", "position_error_force", "reflected_force", "alpha_from_x",
+    "check_geometry", "cylinder_length", "phi_from_x", "x_from_alpha", "acceleration",
+    "advance_load", "drive_force", "friction_force", "piston_force", "slide_or_stick",
+    "critical_pressure_ratio", "mass_flow", "signed_mass_flow", "Cylinder", "Gas",
+    "Geometry", "Load", "Valve", "check_cylinder", "check_gas", "check_load",
+    "check_valve", "ParameterError", "chamber_flows", "orifice_area",
+]

@@ -1,0 +1,69 @@
+"""Elementary functions that take a Python float or a NumPy array.
+
+The physics is written once and must serve two callers: an FMU, which steps one
+scalar state a thousand times a second (where a NumPy ufunc on a float costs ~1 us
+and ``math`` costs ~50 ns), and identification or diagnosis, which evaluate the same
+equations on whole arrays of samples or parameter sets.  Each helper here picks
+``math`` for a float and NumPy for anything else.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+_SCALARS = (float, int)
+
+
+def sqrt(x):
+    return math.sqrt(x) if type(x) in _SCALARS else np.sqrt(x)
+
+
+def cos(x):
+    return math.cos(x) if type(x) in _SCALARS else np.cos(x)
+
+
+def sin(x):
+    return math.sin(x) if type(x) in _SCALARS else np.sin(x)
+
+
+def arccos(x):
+    return math.acos(x) if type(x) in _SCALARS else np.arccos(x)
+
+
+def arcsin(x):
+    return math.asin(x) if type(x) in _SCALARS else np.arcsin(x)
+
+
+def maximum(x, y):
+    if type(x) in _SCALARS and type(y) in _SCALARS:
+        return x if x >= y else y
+    return np.maximum(x, y)
+
+
+def minimum(x, y):
+    if type(x) in _SCALARS and type(y) in _SCALARS:
+        return x if x <= y else y
+    return np.minimum(x, y)
+
+
+def clip(x, lo, hi):
+    if type(x) in _SCALARS and type(lo) in _SCALARS and type(hi) in _SCALARS:
+        return lo if x < lo else (hi if x > hi else x)
+    return np.clip(x, lo, hi)
+
+
+def where(cond, a, b):
+    if type(cond) is bool:
+        return a if cond else b
+    return np.where(cond, a, b)
+
+
+def sign(x):
+    if type(x) in _SCALARS:
+        return 1.0 if x > 0 else (-1.0 if x < 0 else 0.0)
+    return np.sign(x)
+
+
+def abs_(x):
+    return abs(x) if type(x) in _SCALARS else np.abs(x)

@@ -1,0 +1,59 @@
+"""Chamber thermodynamics of the cylinder (the paper's Eq. 2 to 7).
+
+Each chamber's air follows the isentropic energy balance of Eq. 4,
+``k R T mdot = k P dV/dt + V dP/dt``, with the volumes of Eq. 6.
+"""
+from __future__ import annotations
+
+import math
+
+from .params import Cylinder, Gas
+
+
+def chamber_volumes(x, cyl: Cylinder = Cylinder()):
+    """Chamber volumes ``(V_a, V_b)`` [m^3] at piston position ``x`` [m] (Eq. 6)."""
+    return cyl.A_a * x + cyl.V_a0, cyl.A_b * (cyl.L - x) + cyl.V_b0
+
+
+def pressure_rates(p_a, p_b, mdot_a, mdot_b, x, v, cyl: Cylinder = Cylinder(),
+                   gas: Gas = Gas()):
+    """Chamber pressure rates ``(dp_a/dt, dp_b/dt)`` [Pa/s] (Eq. 7).
+
+    ``p_a``, ``p_b`` absolute [Pa]; ``mdot_a``, ``mdot_b`` into each chamber [kg/s];
+    piston position ``x`` [m] and velocity ``v`` [m/s], positive extending.
+    """
+    k, R, T = gas
+    V_a, V_b = chamber_volumes(x, cyl)
+    dp_a = (k * R * T * mdot_a - k * p_a * cyl.A_a * v) / V_a
+    dp_b = (k * R * T * mdot_b + k * p_b * cyl.A_b * v) / V_b
+    return dp_a, dp_b
+
+
+def _mean_power(V_0: float, V_1: float, exponent: float) -> float:
+    """Mean of V^exponent over a linear ramp from V_0 to V_1, divided by V_0^exponent.
+
+    Equals ((V_1/V_0)^(e+1) - 1) / ((e+1) (V_1/V_0 - 1)), evaluated without
+    cancellation when V_1 is close to V_0.
+    """
+    d = V_1 / V_0 - 1.0
+    n = exponent + 1.0
+    if abs(d) < 1e-6:
+        return 1.0 + 0.5 * exponent * d + exponent * (exponent - 1.0) / 6.0 * d * d
+    return math.expm1(n * math.log1p(d)) / (n * d)
+
+
+def chamber_pressure_step(P_0: float, V_0: float, V_1: float, mdot: float, dt: float,
+                          gas: Gas = Gas()) -> float:
+    """Exact chamber pressure [Pa] after ``dt`` [s] of constant inflow ``mdot`` [kg/s]
+    while the volume moves linearly from ``V_0`` to ``V_1`` [m^3].
+
+    Integrating Eq. 4 gives ``d(P V^k)/dt = k R T mdot V^(k-1)``, so::
+
+        P_1 V_1^k = P_0 V_0^k + k R T mdot * integral of V^(k-1) dt
+
+    This is exact for held inputs, so it is stable for any step, and a closed chamber
+    (``mdot = 0``) keeps ``P V^k`` constant to rounding.
+    """
+    k, R, T = gas
+    integral = dt * V_0 ** (k - 1.0) * _mean_power(V_0, V_1, k - 1.0)
+    return (P_0 * V_0**k + k * R * T * mdot * integral) / V_1**k

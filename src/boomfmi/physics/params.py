@@ -1,0 +1,88 @@
+"""Parameter groups of the boom model, with the reference rig's values as defaults.
+
+Plain named tuples: cheap to pass into the per-step physics, easy to build from an
+FMU's parameters once at initialisation, and each with a ``check_*`` function that
+names the offending field.  Units are SI throughout; pressures are absolute.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+from . import reference_rig as rig
+from .validation import (ParameterError, require_finite, require_non_negative,
+                         require_positive)
+
+
+class Gas(NamedTuple):
+    """Thermodynamic constants of the air (Eq. 1, 4 to 7)."""
+    k: float = rig.k      #: ratio of specific heats [1]
+    R: float = rig.R      #: specific gas constant [J/(kg K)]
+    T: float = rig.T      #: temperature [K]
+
+
+class Valve(NamedTuple):
+    """The proportional valve (Eq. 1 and the reference rig's A(u) and routing)."""
+    A_max: float = rig.A_max        #: orifice area at full opening [m^2]
+    P_s: float = rig.P_s            #: supply pressure, absolute [Pa]
+    P_e: float = rig.P_e            #: exhaust pressure, absolute [Pa]
+    u_centre: float = rig.u_centre  #: command that closes every port [V]
+    u_span: float = 5.0             #: command offset from centre for full opening [V]
+
+
+class Cylinder(NamedTuple):
+    """The double-acting cylinder (Eq. 6, 7)."""
+    A_a: float = rig.A_a    #: cap-side piston area [m^2]
+    A_b: float = rig.A_b    #: rod-side annulus area [m^2]
+    L: float = rig.L        #: stroke [m]
+    V_a0: float = rig.V_a0  #: dead volume of chamber A [m^3]
+    V_b0: float = rig.V_b0  #: dead volume of chamber B [m^3]
+
+
+class Geometry(NamedTuple):
+    """Boom linkage of Eq. 10 to 12 [m]."""
+    a: float = rig.a
+    b: float = rig.b
+    h: float = rig.h
+    l_min: float = rig.l_min
+
+
+class Load(NamedTuple):
+    """Boom load and friction of Eq. 8, 9."""
+    K_v: float = rig.K_v  #: viscous friction coefficient [N s/m]
+    F_s: float = rig.F_s  #: static friction force [N]
+    F_d: float = rig.F_d  #: Coulomb friction force [N]
+    F_L: float = rig.F_L  #: load force from the backhoe's weight [N]
+    M: float = rig.M      #: moving mass reduced to the piston [kg]
+
+
+def check_gas(gas: Gas) -> None:
+    """Raise :class:`ParameterError` unless k > 1, R > 0 and T > 0."""
+    require_finite("k", gas.k)
+    if gas.k <= 1.0:
+        raise ParameterError("k", gas.k, "the ratio of specific heats must be > 1")
+    require_positive("R", gas.R)
+    require_positive("T", gas.T)
+
+
+def check_valve(valve: Valve) -> None:
+    """Raise unless A_max >= 0, P_s > 0, P_e > 0 and u_span > 0."""
+    require_non_negative("A_max", valve.A_max)
+    require_positive("P_s", valve.P_s)
+    require_positive("P_e", valve.P_e)
+    require_finite("u_centre", valve.u_centre)
+    require_positive("u_span", valve.u_span)
+
+
+def check_cylinder(cyl: Cylinder) -> None:
+    """Raise unless every area, the stroke and both dead volumes are > 0."""
+    for name in Cylinder._fields:
+        require_positive(name, getattr(cyl, name))
+
+
+def check_load(load: Load) -> None:
+    """Raise unless M > 0 and the friction and load forces are >= 0."""
+    require_positive("M", load.M)
+    require_non_negative("K_v", load.K_v)
+    require_non_negative("F_s", load.F_s)
+    require_non_negative("F_d", load.F_d)
+    require_finite("F_L", load.F_L)
