@@ -24,6 +24,8 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("names", nargs="*", default=list(FMU_NAMES), help="FMUs to build (default: all)")
     parser.add_argument("--out", type=Path, default=HERE / "build", help="output folder (default: build/)")
+    parser.add_argument("--write-references", action="store_true",
+                        help="also rewrite fmus/<name>/<name>_in.csv and _ref.csv from the built FMUs")
     args = parser.parse_args(argv)
     unknown = sorted(set(args.names) - set(FMU_NAMES))
     if unknown:
@@ -31,7 +33,10 @@ def main(argv=None) -> int:
     try:
         for name in args.names:
             path = build_fmu(HERE / "fmus" / name, args.out / "fmus")
-            print(f"built {path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path}")
+            print(f"built {path}")
+            if args.write_references:
+                from boomfmi.fmubuild.references import write_references
+                print(f"wrote {write_references(HERE / 'fmus' / name, path)}")
     except BuildError as e:
         print(f"build_fmus.py: {e}", file=sys.stderr)
         return 1

@@ -104,7 +104,7 @@ class BoomSlave(Fmi2Slave):
         """Report an error: logged with status fmi2Error, every later call fails too."""
         if self.failure is None:
             self.failure = message
-        self.log(f"{self.instance_name}: {message}", Fmi2Status.error)
+        self.log(message, Fmi2Status.error)
 
     def exit_initialization_mode(self):
         try:
@@ -130,7 +130,7 @@ class BoomSlave(Fmi2Slave):
 
     def do_step(self, current_time, step_size):
         if self.failure is not None:
-            self.log(f"{self.instance_name}: cannot step: {self.failure}", Fmi2Status.error)
+            self.log(f"cannot step: {self.failure}", Fmi2Status.error)
             return False
         if not step_size > 0.0:
             self.fail(f"communication step size must be > 0, got {step_size!r}")

@@ -1,0 +1,66 @@
+"""Reference results next to each FMU, in the manner of the Modelica Reference-FMUs.
+
+``fmus/<name>/<name>_in.csv`` holds a small input table (``time`` and the FMU's
+inputs); ``fmus/<name>/<name>_ref.csv`` the outputs the built FMU gives for it, as
+:func:`boomfmi.system.instance.run_table` replays it.  The tests replay every pair
+through the built ``.fmu``; ``python build_fmus.py --write-references`` rewrites the
+``_ref.csv`` files after a deliberate change of the physics.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..physics import reference_rig as rig
+
+
+def _valve() -> pd.DataFrame:
+    u = np.array([5.0, 4.0, 2.5, 1.0, 0.0, 6.0, 7.5, 9.0, 10.0, 5.0, 3.0, 8.0])
+    p_a = np.array([1.0, 2.0, 3.0, 5.0, 7.0, 7.0, 4.0, 2.0, 1.2, 3.0, 6.9, 1.1]) * 1e5 + rig.P_atm
+    p_b = np.array([1.0, 6.0, 4.0, 0.5, 0.0, 0.2, 3.0, 5.5, 6.5, 3.0, 0.1, 6.9]) * 1e5 + rig.P_atm
+    return pd.DataFrame({"time": np.arange(len(u)) * 1e-3, "u": u, "p_a": p_a, "p_b": p_b})
+
+
+def _cylinder() -> pd.DataFrame:
+    t = np.arange(0.0, 0.1001, 1e-3)
+    x = 0.03 + 0.02 * np.sin(2 * np.pi * 5 * t)
+    v = 0.02 * 2 * np.pi * 5 * np.cos(2 * np.pi * 5 * t)
+    return pd.DataFrame({"time": t, "mdot_a": np.where(t < 0.05, 1e-3, -5e-4),
+                         "mdot_b": np.where(t < 0.05, -1e-4, 1e-3), "x": x, "v": v})
+
+
+def _boom_load() -> pd.DataFrame:
+    t = np.arange(0.0, 1.5001, 5e-3)
+    p_a = rig.P_atm + np.interp(t, [0, 0.2, 0.8, 0.9, 1.5], [0, 6e5, 6e5, 0, 0])
+    p_b = rig.P_atm + np.interp(t, [0, 0.8, 0.9, 1.0, 1.5], [0, 0, 6e5, 6e5, 6e5])
+    f_ext = np.where((t > 0.4) & (t < 0.5), 150.0, 0.0)
+    return pd.DataFrame({"time": t, "p_a": p_a, "p_b": p_b, "f_ext": f_ext})
+
+
+def _force_estimator() -> pd.DataFrame:
+    t = np.arange(0.0, 0.2001, 1e-3)
+    x_model = 0.001 * t / 0.2 * 10
+    return pd.DataFrame({"time": t, "x_model": x_model, "x_measured": 0.8 * x_model,
+                         "v_model": np.full_like(t, 0.05), "v_measured": np.full_like(t, 0.04)})
+
+
+INPUTS = {"valve": _valve, "cylinder": _cylinder, "boom_load": _boom_load,
+          "force_estimator": _force_estimator}
+
+
+def paths(fmu_dir: Path) -> tuple[Path, Path]:
+    name = Path(fmu_dir).name
+    return Path(fmu_dir) / f"{name}_in.csv", Path(fmu_dir) / f"{name}_ref.csv"
+
+
+def write_references(fmu_dir: Path, fmu_path: Path) -> Path:
+    """Write ``<name>_in.csv`` and ``<name>_ref.csv`` next to the FMU's script."""
+    from ..system.instance import run_table
+    name = Path(fmu_dir).name
+    in_csv, ref_csv = paths(fmu_dir)
+    table = INPUTS[name]()
+    table.to_csv(in_csv, index=False, float_format="%.17g")
+    run_table(fmu_path, pd.read_csv(in_csv)).to_csv(ref_csv, index=False, float_format="%.17g")
+    return ref_csv

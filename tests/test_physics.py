@@ -1,0 +1,113 @@
+"""boomfmi.physics on its own: scalar and array paths agree, closed forms hold."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from boomfmi import physics as ph
+from boomfmi.physics import reference_rig as rig
+
+
+def test_scalar_and_array_paths_agree():
+    rng = np.random.default_rng(1)
+    u = rng.uniform(0, 10, 200)
+    p_a = rng.uniform(0.9e5, 7.5e5, 200)
+    p_b = rng.uniform(0.9e5, 7.5e5, 200)
+    arr_a, arr_b = ph.chamber_flows(u, p_a, p_b)
+    for i in range(200):
+        sa, sb = ph.chamber_flows(float(u[i]), float(p_a[i]), float(p_b[i]))
+        assert sa == pytest.approx(arr_a[i], rel=1e-13, abs=1e-18)
+        assert sb == pytest.approx(arr_b[i], rel=1e-13, abs=1e-18)
+    x = rng.uniform(0, rig.L, 50)
+    np.testing.assert_allclose(ph.phi_from_x(x), [ph.phi_from_x(float(v)) for v in x], rtol=1e-14)
+
+
+def test_x_alpha_x_round_trip():
+    x = np.linspace(0.0, rig.L, 10001)
+    np.testing.assert_allclose(ph.x_from_alpha(ph.alpha_from_x(x)), x, rtol=0, atol=1e-12)
+    for v in (0.0, 0.017, rig.L):
+        assert abs(ph.x_from_alpha(ph.alpha_from_x(v)) - v) < 1e-12
+
+
+def test_choked_branch_equals_subsonic_formula_at_critical_ratio():
+    gas = ph.Gas()
+    p_cr = ph.critical_pressure_ratio(gas.k)
+    k, R, T = gas
+    sub = math.sqrt(2 * k / (R * T * (k - 1))) * math.sqrt(p_cr ** (2 / k) - p_cr ** ((k + 1) / k))
+    choked = math.sqrt(k / (R * T)) * (2 / (k + 1)) ** ((k + 1) / (2 * (k - 1)))
+    assert sub == pytest.approx(choked, rel=1e-14)
+
+
+def test_signed_flow_reverses_with_the_pressures():
+    assert ph.signed_mass_flow(1e-6, 3e5, 2e5) == pytest.approx(-ph.signed_mass_flow(1e-6, 2e5, 3e5))
+    assert ph.signed_mass_flow(1e-6, 3e5, 3e5) == 0.0
+
+
+def test_chamber_step_is_exact_for_constant_volume_and_flow():
+    V, mdot, dt = 3e-5, 2e-4, 0.01
+    gas = ph.Gas()
+    p = ph.chamber_pressure_step(2e5, V, V, mdot, dt, gas)
+    assert p == pytest.approx(2e5 + gas.k * gas.R * gas.T * mdot * dt / V, rel=1e-13)
+
+
+def test_chamber_step_matches_fine_integration_of_eq_4():
+    """Held flow, moving piston: the closed form against RK4 on Eq. 4 with tiny steps."""
+    gas, mdot, dt = ph.Gas(), 3e-4, 2e-3
+    V0, V1 = 2.0e-5, 3.3e-5
+    P = 2e5
+    n = 20000
+    for i in range(n):
+        def f(s, P):
+            V = V0 + (V1 - V0) * s / dt
+            return (gas.k * gas.R * gas.T * mdot - gas.k * P * (V1 - V0) / dt) / V
+        t, hh = i * dt / n, dt / n
+        k1 = f(t, P); k2 = f(t + hh / 2, P + hh / 2 * k1); k3 = f(t + hh / 2, P + hh / 2 * k2)
+        k4 = f(t + hh, P + hh * k3)
+        P += hh / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    assert ph.chamber_pressure_step(2e5, V0, V1, mdot, dt, gas) == pytest.approx(P, rel=1e-10)
+
+
+def test_slide_stops_exactly_when_velocity_reaches_zero():
+    load = ph.Load()
+    v0, F = 0.05, -50.0                                   # sliding up, drive pulls down
+    dx, v = ph.slide_or_stick(v0, F, 1.0, 0.5, load)
+    assert v == 0.0                                       # stuck: |F| < F_s
+    F_net = F - load.F_d
+    t_rest = load.M / load.K_v * math.log1p(-load.K_v * v0 / F_net)
+    tau = load.M / load.K_v
+    v_inf = F_net / load.K_v
+    expected = v_inf * t_rest + (v0 - v_inf) * tau * (1 - math.exp(-t_rest / tau))
+    assert dx == pytest.approx(expected, rel=1e-12)
+
+
+def test_slide_reverses_when_the_drive_exceeds_static_friction():
+    load = ph.Load()
+    dx, v = ph.slide_or_stick(0.01, -400.0, 1.0, 0.2, load)
+    assert v < 0
+
+
+def test_coulomb_friction_without_viscosity():
+    load = ph.Load(K_v=0.0)
+    dx, v = ph.slide_or_stick(0.0, 200.0, 1.0, 0.01, load)
+    a = (200.0 - load.F_d) / load.M
+    assert v == pytest.approx(a * 0.01, rel=1e-12)
+    assert dx == pytest.approx(a * 0.01**2 / 2, rel=1e-12)
+
+
+def test_friction_force_is_eq_9():
+    load = ph.Load()
+    phi = 0.9
+    c = math.cos(phi)
+    assert ph.friction_force(0.0, 50.0, phi, load) == 50.0
+    assert ph.friction_force(0.0, 200.0, phi, load) == pytest.approx(load.F_d * c)
+    assert ph.friction_force(-0.1, 0.0, phi, load) == pytest.approx(-load.F_d * c)
+    arr = ph.friction_force(np.array([0.0, 0.0, 0.1]), np.array([50.0, -200.0, 0.0]), phi, load)
+    np.testing.assert_allclose(arr, [50.0, -load.F_d * c, load.F_d * c])
+
+
+def test_geometry_check_names_the_parameter():
+    with pytest.raises(ph.ParameterError, match="parameter h"):
+        ph.check_geometry(ph.Geometry(h=0.2), rig.L)
+    ph.check_geometry(ph.Geometry(), rig.L)
