@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Build every boomfmi FMU into build/fmus/ (and, as the SSP lands, build/*.ssp).
+"""Build every boomfmi FMU into build/fmus/ and pack the SSP systems into build/*.ssp.
 
     python build_fmus.py [--out build] [NAME ...]
 
@@ -18,6 +18,8 @@ sys.path.insert(0, str(HERE / "src"))
 from boomfmi.fmubuild import BuildError, build_fmu  # noqa: E402
 
 FMU_NAMES = ("valve", "cylinder", "boom_load", "force_estimator")
+#: SSP archives: build/<name>.ssp from ssp/<ssd>
+SSPS = {"excavator_boom": "SystemStructure.ssd"}
 
 
 def main(argv=None) -> int:
@@ -37,6 +39,12 @@ def main(argv=None) -> int:
             if args.write_references:
                 from boomfmi.fmubuild.references import write_references
                 print(f"wrote {write_references(HERE / 'fmus' / name, path)}")
+        if set(args.names) == set(FMU_NAMES):
+            from boomfmi.fmubuild.ssp import pack_ssp, write_reference_parameters
+            if args.write_references:
+                print(f"wrote {write_reference_parameters(HERE / 'ssp' / 'SystemStructure.ssd', args.out / 'fmus', HERE / 'ssp' / 'reference_rig.ssv')}")
+            for name, ssd in SSPS.items():
+                print(f"packed {pack_ssp(HERE / 'ssp' / ssd, args.out / 'fmus', args.out / f'{name}.ssp')}")
     except BuildError as e:
         print(f"build_fmus.py: {e}", file=sys.stderr)
         return 1
