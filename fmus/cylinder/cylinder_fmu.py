@@ -4,7 +4,9 @@ Inputs the mass flows into each chamber and the piston's position and velocity;
 outputs the absolute chamber pressures, its states (Eq. 5 to 7).  Within a
 communication step the flows are held and the piston moves linearly with the input
 velocity; the energy balance of Eq. 4 is then integrated exactly, so the step is
-stable for any step size.
+stable for any step size.  Where the valve also passes each flow's slope with respect
+to the chamber pressure, the chambers are integrated against that linearisation of the
+flow (an exponential integrator, stable however short the chamber's time constant).
 """
 from boomfmi_cylinder_lib.fmislave import BoomSlave, input, output, parameter
 from boomfmi_cylinder_lib.physics import (Cylinder as CylinderParams, Gas, ParameterError,
@@ -20,6 +22,8 @@ class Cylinder(BoomSlave):
         input("mdot_b", 0.0, "kg/s", "mass flow into chamber B"),
         input("x", 0.0, "m", "piston position, 0 = fully retracted", min=0.0),
         input("v", 0.0, "m/s", "piston velocity, positive extending"),
+        input("dmdot_a_dp_a", 0.0, "kg/(s.Pa)", "slope of mdot_a with respect to p_a; 0 holds mdot_a over the step", max=0.0),
+        input("dmdot_b_dp_b", 0.0, "kg/(s.Pa)", "slope of mdot_b with respect to p_b; 0 holds mdot_b over the step", max=0.0),
         output("p_a", rig.P_atm, "Pa", "absolute pressure in chamber A (cap side)", min=0.0),
         output("p_b", rig.P_atm, "Pa", "absolute pressure in chamber B (rod side)", min=0.0),
         parameter("A_a", rig.A_a, "m2", "cap-side piston area", min=0.0),
@@ -55,8 +59,10 @@ class Cylinder(BoomSlave):
         x_1 = min(max(x_0 + self.v * dt, 0.0), L)
         V_a0, V_b0 = chamber_volumes(x_0, self._cyl)
         V_a1, V_b1 = chamber_volumes(x_1, self._cyl)
-        p_a = chamber_pressure_step(self.p_a, V_a0, V_a1, self.mdot_a, dt, self._gas)
-        p_b = chamber_pressure_step(self.p_b, V_b0, V_b1, self.mdot_b, dt, self._gas)
+        p_a = chamber_pressure_step(self.p_a, V_a0, V_a1, self.mdot_a, dt, self._gas,
+                                    min(self.dmdot_a_dp_a, 0.0))
+        p_b = chamber_pressure_step(self.p_b, V_b0, V_b1, self.mdot_b, dt, self._gas,
+                                    min(self.dmdot_b_dp_b, 0.0))
         if not (p_a > 0.0 and p_b > 0.0):
             raise ValueError(
                 f"a chamber emptied (p_a = {p_a:g} Pa, p_b = {p_b:g} Pa): the outflow "

@@ -2,11 +2,14 @@
 
 Inputs u [V] and the absolute chamber pressures; outputs the mass flows into each
 chamber through the ports that the command opens (Eq. 1, standard form, and the
-reference rig's routing and A(u)).  The flows depend directly on the inputs; the FMU
-has no state.
+reference rig's routing and A(u)), and each flow's slope with respect to its chamber's
+pressure, which lets the cylinder integrate its chambers against the valve's local
+linearisation (stable coupling at any communication step).  The outputs depend
+directly on the inputs; the FMU has no state.
 """
 from boomfmi_valve_lib.fmislave import BoomSlave, input, output, parameter
-from boomfmi_valve_lib.physics import Gas, Valve as ValveParams, chamber_flows, check_gas, check_valve
+from boomfmi_valve_lib.physics import (Gas, Valve as ValveParams, chamber_flow_slopes, chamber_flows,
+                                       check_gas, check_valve)
 from boomfmi_valve_lib.physics import reference_rig as rig
 
 
@@ -18,6 +21,8 @@ class Valve(BoomSlave):
         input("p_b", rig.P_atm, "Pa", "absolute pressure in chamber B (rod side)", min=0.0),
         output("mdot_a", 0.0, "kg/s", "mass flow into chamber A (negative when A exhausts)", depends=("u", "p_a", "p_b")),
         output("mdot_b", 0.0, "kg/s", "mass flow into chamber B (negative when B exhausts)", depends=("u", "p_a", "p_b")),
+        output("dmdot_a_dp_a", 0.0, "kg/(s.Pa)", "slope of mdot_a with respect to p_a (<= 0)", depends=("u", "p_a", "p_b"), max=0.0),
+        output("dmdot_b_dp_b", 0.0, "kg/(s.Pa)", "slope of mdot_b with respect to p_b (<= 0)", depends=("u", "p_a", "p_b"), max=0.0),
         parameter("P_s", rig.P_s, "Pa", "supply pressure, absolute", min=0.0),
         parameter("P_e", rig.P_e, "Pa", "exhaust pressure, absolute", min=0.0),
         parameter("A_max", rig.A_max, "m2", "orifice area of each port at full opening", min=0.0),
@@ -31,7 +36,7 @@ class Valve(BoomSlave):
         self.modelName = "valve"
         self._valve, self._gas = ValveParams(), Gas()
         self._key = None
-        self._flows = (0.0, 0.0)
+        self._flows = (0.0, 0.0, 0.0, 0.0)
 
     def setup(self):
         self._valve = ValveParams(A_max=self.A_max, P_s=self.P_s, P_e=self.P_e)
@@ -45,9 +50,10 @@ class Valve(BoomSlave):
         if key != self._key:
             if not (self.p_a > 0.0 and self.p_b > 0.0):
                 self.fail(f"input pressures must be > 0 Pa absolute, got p_a = {self.p_a!r}, p_b = {self.p_b!r}")
-                self._flows = (0.0, 0.0)
+                self._flows = (0.0, 0.0, 0.0, 0.0)
             else:
-                self._flows = chamber_flows(self.u, self.p_a, self.p_b, self._valve, self._gas)
+                self._flows = (*chamber_flows(self.u, self.p_a, self.p_b, self._valve, self._gas),
+                               *chamber_flow_slopes(self.u, self.p_a, self.p_b, self._valve, self._gas))
             self._key = key
         return self._flows
 
@@ -58,6 +64,14 @@ class Valve(BoomSlave):
     @property
     def mdot_b(self):
         return self._current_flows()[1]
+
+    @property
+    def dmdot_a_dp_a(self):
+        return self._current_flows()[2]
+
+    @property
+    def dmdot_b_dp_b(self):
+        return self._current_flows()[3]
 
     def step(self, t, dt):
         pass  # no state: the flows follow the inputs at every communication point

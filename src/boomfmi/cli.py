@@ -1,5 +1,7 @@
 """The ``boomfmi`` command: a thin layer over the library.
 
+    boomfmi simulate SSP --experiment paper_multistep|RUN.csv [--step 0.001] [--stop 9]
+                         [--params params.ssv] [--algorithm gauss-seidel|jacobi] --out result.csv
     boomfmi describe FMU [FMU ...]      the FMUs' interfaces as Markdown tables
     boomfmi check FMU_DIR               validate every FMU and replay its reference result
 """
@@ -42,9 +44,33 @@ def _check(args) -> int:
     return 1 if failures else 0
 
 
+def _simulate(args) -> int:
+    from .simulate import run_experiment
+    result = run_experiment(args.ssp, args.experiment, args.step, args.stop, args.algorithm,
+                            args.params, progress=True)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    result.to_csv(args.out, index=False, float_format="%.10g")
+    last = result.iloc[-1]
+    print(f"wrote {args.out}: {len(result)} rows, t = {result.t.iloc[0]:g} to {last.t:g} s; "
+          f"at the end x = {1000 * last.x:.2f} mm, p_a = {last.p_a / 1e5:.3f} bar, "
+          f"p_b = {last.p_b / 1e5:.3f} bar (gauge)")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="boomfmi", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("simulate", help="run an experiment on an SSP system, write a recording-format CSV")
+    p.add_argument("ssp", type=Path, help="the system, e.g. build/excavator_boom.ssp")
+    p.add_argument("--experiment", default="paper_multistep",
+                   help="a named command profile (paper_multistep) or a recording whose u drives the valve")
+    p.add_argument("--step", type=float, default=1e-3, help="communication step [s] (default 0.001)")
+    p.add_argument("--stop", type=float, default=None, help="stop time [s] (default: the experiment's end)")
+    p.add_argument("--params", type=Path, action="append", default=[],
+                   help="a parameter set (.ssv, names like valve.A_max) applied after the SSP's own; repeatable")
+    p.add_argument("--algorithm", choices=("gauss-seidel", "jacobi"), default="gauss-seidel")
+    p.add_argument("--out", type=Path, required=True, help="output CSV (recording columns plus x, v)")
+    p.set_defaults(run=_simulate)
     p = sub.add_parser("describe", help="print FMU interfaces as Markdown tables")
     p.add_argument("fmus", nargs="+", type=Path)
     p.set_defaults(run=_describe)
@@ -56,7 +82,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.run(args)
-    except (FileNotFoundError, ValueError, RuntimeError) as e:
+    except (FileNotFoundError, ValueError, RuntimeError, KeyError) as e:
         print(f"boomfmi {args.command}: {e}", file=sys.stderr)
         return 1
 

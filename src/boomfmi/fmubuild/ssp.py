@@ -3,6 +3,13 @@
 ``build/excavator_boom.ssp`` is a zip holding ``SystemStructure.ssd`` (from ``ssp/``),
 the ``.ssv`` files it binds and the FMUs it names, under ``resources/``, so the whole
 boom can be opened by any SSP tool.
+
+Third-party tools (libcosim, ecos) apply parameter sets only where they are bound to a
+component, with bare names.  The source of the parameters stays one file with
+hierarchical names, ``ssp/reference_rig.ssv``; a component binding of
+``resources/<set>_<component>.ssv`` that has no file of its own in ``ssp/`` is cut from
+``ssp/<set>.ssv`` when packing: the entries ``<component>.*``, with bare names, in a
+parameter set named ``<set>``.
 """
 from __future__ import annotations
 
@@ -10,16 +17,44 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from ..system.ssv import NS, write_ssv
+from ..system.ssv import NS, read_ssv, write_ssv
 from . import BuildError
 
 
-def referenced_sources(ssd: Path) -> list[str]:
-    """Every ``source`` the SSD refers to (components and parameter bindings)."""
+def referenced_sources(ssd: Path) -> list[tuple[str, str | None]]:
+    """Every ``source`` the SSD refers to, with the component it belongs to (None at
+    system level)."""
     root = ET.parse(ssd).getroot()
-    sources = [c.get("source") for c in root.iter(f"{{{NS['ssd']}}}Component")]
-    sources += [b.get("source") for b in root.iter(f"{{{NS['ssd']}}}ParameterBinding") if b.get("source")]
+    sources = []
+    for c in root.iter(f"{{{NS['ssd']}}}Component"):
+        sources.append((c.get("source"), c.get("name")))
+        for b in c.iter(f"{{{NS['ssd']}}}ParameterBinding"):
+            if b.get("source"):
+                sources.append((b.get("source"), c.get("name")))
+    system = root.find("ssd:System", NS)
+    for b in system.findall("ssd:ParameterBindings/ssd:ParameterBinding", NS):
+        if b.get("source"):
+            sources.append((b.get("source"), None))
     return sources
+
+
+def component_parameter_set(source_dir: Path, file_name: str, component: str) -> bytes | None:
+    """The ``.ssv`` for ``<set>_<component>.ssv`` cut from ``source_dir/<set>.ssv``."""
+    suffix = f"_{component}.ssv"
+    if not file_name.endswith(suffix):
+        return None
+    set_name = file_name[: -len(suffix)]
+    whole = source_dir / f"{set_name}.ssv"
+    if not whole.is_file():
+        return None
+    params = read_ssv(whole.read_bytes(), str(whole))
+    prefix = component + "."
+    part = {n[len(prefix):]: (p.value, p.unit) for n, p in params.items() if n.startswith(prefix)}
+    import tempfile
+    with tempfile.TemporaryDirectory() as tmp:
+        out = write_ssv(Path(tmp) / file_name, set_name, part,
+                        f"{component}'s part of {whole.name}")
+        return out.read_bytes()
 
 
 def pack_ssp(ssd: Path, fmu_dir: Path, out: Path) -> Path:
@@ -31,14 +66,18 @@ def pack_ssp(ssd: Path, fmu_dir: Path, out: Path) -> Path:
     tmp = out.with_suffix(".tmp")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
         z.write(ssd, "SystemStructure.ssd")
-        for source in referenced_sources(ssd):
+        for source, component in referenced_sources(ssd):
             if not source.startswith("resources/"):
                 raise BuildError(f"{ssd}: source {source!r} must lie under resources/")
             name = source.removeprefix("resources/")
             origin = (fmu_dir / name) if name.endswith(".fmu") else (ssd.parent / name)
-            if not origin.is_file():
+            if origin.is_file():
+                z.write(origin, source)
+                continue
+            part = component_parameter_set(ssd.parent, name, component) if component else None
+            if part is None:
                 raise BuildError(f"{ssd}: references {source}, but {origin} does not exist")
-            z.write(origin, source)
+            z.writestr(source, part)
     tmp.replace(out)
     return out
 

@@ -11,11 +11,12 @@ from .force_estimation import pneumatic_stiffness, position_error_force, reflect
 from .geometry import alpha_from_x, check_geometry, cylinder_length, phi_from_x, x_from_alpha
 from .load import (acceleration, advance_load, drive_force, friction_force, piston_force,
                    slide_or_stick)
-from .orifice import critical_pressure_ratio, mass_flow, signed_mass_flow
+from .orifice import (critical_pressure_ratio, mass_flow, mass_flow_slope, signed_mass_flow,
+                      signed_mass_flow_slope)
 from .params import (Cylinder, Gas, Geometry, Load, Valve, check_cylinder, check_gas,
                      check_load, check_valve)
 from .validation import ParameterError
-from .valve import chamber_flows, orifice_area
+from .valve import chamber_flow_slopes, chamber_flows, orifice_area
 
 __all__ = [
     "reference_rig", "chamber_pressure_step", "chamber_volumes", "pressure_rates",
@@ -24,5 +25,6 @@ __all__ = [
     "advance_load", "drive_force", "friction_force", "piston_force", "slide_or_stick",
     "critical_pressure_ratio", "mass_flow", "signed_mass_flow", "Cylinder", "Gas",
     "Geometry", "Load", "Valve", "check_cylinder", "check_gas", "check_load",
-    "check_valve", "ParameterError", "chamber_flows", "orifice_area",
+    "check_valve", "ParameterError", "chamber_flows", "orifice_area", "chamber_flow_slopes",
+    "mass_flow_slope", "signed_mass_flow_slope",
 ]

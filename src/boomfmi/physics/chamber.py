@@ -43,7 +43,7 @@ def _mean_power(V_0: float, V_1: float, exponent: float) -> float:
 
 
 def chamber_pressure_step(P_0: float, V_0: float, V_1: float, mdot: float, dt: float,
-                          gas: Gas = Gas()) -> float:
+                          gas: Gas = Gas(), dmdot_dP: float = 0.0) -> float:
     """Exact chamber pressure [Pa] after ``dt`` [s] of constant inflow ``mdot`` [kg/s]
     while the volume moves linearly from ``V_0`` to ``V_1`` [m^3].
 
@@ -53,7 +53,28 @@ def chamber_pressure_step(P_0: float, V_0: float, V_1: float, mdot: float, dt: f
 
     This is exact for held inputs, so it is stable for any step, and a closed chamber
     (``mdot = 0``) keeps ``P V^k`` constant to rounding.
+
+    With ``dmdot_dP`` [kg/(s Pa)] (<= 0), the inflow is the valve's linearisation
+    ``mdot + dmdot_dP (P - P_0)`` instead: Eq. 4 is then linear in ``y = P V^k``,
+    ``dy/dt = k R T V^(k-1) (mdot - dmdot_dP P_0) + (k R T dmdot_dP / V) y``, and is
+    solved by an exponential integrator over four substeps (volume frozen at each
+    substep's midpoint).  It stays stable for any step however fast the chamber's own
+    time constant, which explicit coupling of valve and cylinder does not.
     """
     k, R, T = gas
-    integral = dt * V_0 ** (k - 1.0) * _mean_power(V_0, V_1, k - 1.0)
-    return (P_0 * V_0**k + k * R * T * mdot * integral) / V_1**k
+    if dmdot_dP == 0.0:
+        integral = dt * V_0 ** (k - 1.0) * _mean_power(V_0, V_1, k - 1.0)
+        return (P_0 * V_0**k + k * R * T * mdot * integral) / V_1**k
+    n = 4
+    h = dt / n
+    kRT = k * R * T
+    source = mdot - dmdot_dP * P_0
+    y = P_0 * V_0**k
+    for i in range(n):
+        V = V_0 + (V_1 - V_0) * (i + 0.5) / n
+        lam = kRT * dmdot_dP / V
+        z = lam * h
+        e = math.exp(z)
+        phi1 = math.expm1(z) / z if abs(z) > 1e-8 else 1.0 + 0.5 * z
+        y = e * y + h * phi1 * kRT * V ** (k - 1.0) * source
+    return y / V_1**k

@@ -8,6 +8,15 @@ The paper prints Eq. 1 with 2/(k-1) outside the square root and the choked expon
     r <  P_cr:  mdot = A P_u sqrt(k / (R T)) (2/(k+1))^((k+1)/(2(k-1)))
 
 which is continuous at r = P_cr = (2/(k+1))^(k/(k-1)).
+
+Near r = 1 the subsonic branch behaves like sqrt(1 - r): its slope with respect to the
+pressures is infinite at equal pressures, so a chamber approaching the supply pressure
+reaches it in finite time and no implicit integrator can converge there (the Jacobian
+is unbounded).  Above ``R_LAMINAR`` = 0.999 (a pressure difference under 0.1 % of the
+upstream pressure, 700 Pa at the supply) the flow is therefore taken linear in the
+pressure difference, through the formula's value at ``R_LAMINAR`` and zero at r = 1: a
+laminar region, as in ISO 6358 style valve models.  It is continuous, and changes
+nothing outside that band.
 """
 from __future__ import annotations
 
@@ -18,6 +27,15 @@ from .params import Gas
 def critical_pressure_ratio(k: float) -> float:
     """P_cr = (2/(k+1))^(k/(k-1)) [1]; 0.5283 for k = 1.4 (the paper prints 0.582)."""
     return (2.0 / (k + 1.0)) ** (k / (k - 1.0))
+
+
+#: Pressure ratio above which the flow is taken linear in the pressure difference.
+R_LAMINAR = 0.999
+
+
+def _subsonic_root(r, k):
+    """sqrt(r^(2/k) - r^((k+1)/k)), the pressure-ratio factor of the subsonic branch."""
+    return xp.sqrt(xp.maximum(r ** (2.0 / k) - r ** ((k + 1.0) / k), 0.0))
 
 
 def mass_flow(A, P_u, P_d, gas: Gas = Gas()):
@@ -36,10 +54,28 @@ def mass_flow(A, P_u, P_d, gas: Gas = Gas()):
     k, R, T = gas
     P_cr = critical_pressure_ratio(k)
     r = xp.clip(P_d / P_u, 0.0, 1.0)
-    subsonic = (2.0 * k / (R * T * (k - 1.0))) ** 0.5 * xp.sqrt(
-        xp.maximum(r ** (2.0 / k) - r ** ((k + 1.0) / k), 0.0))
+    C = (2.0 * k / (R * T * (k - 1.0))) ** 0.5
+    subsonic = C * _subsonic_root(xp.minimum(r, R_LAMINAR), k)
+    laminar = C * _subsonic_root(R_LAMINAR, k) * (1.0 - r) / (1.0 - R_LAMINAR)
     choked = (k / (R * T)) ** 0.5 * (2.0 / (k + 1.0)) ** ((k + 1.0) / (2.0 * (k - 1.0)))
-    return A * P_u * xp.where(r >= P_cr, subsonic, choked)
+    return A * P_u * xp.where(r >= P_cr, xp.where(r > R_LAMINAR, laminar, subsonic), choked)
+
+
+def mass_flow_slope(A, P_u, P_d, gas: Gas = Gas()):
+    """d mdot / d P_d [kg/(s Pa)] of :func:`mass_flow` at fixed P_u (<= 0: a higher
+    downstream pressure lets less air through)."""
+    k, R, T = gas
+    P_cr = critical_pressure_ratio(k)
+    r = xp.clip(P_d / P_u, 0.0, 1.0)
+    C = (2.0 * k / (R * T * (k - 1.0))) ** 0.5
+    rs = xp.minimum(r, R_LAMINAR)
+    root = _subsonic_root(rs, k)
+    # d/dr sqrt(g(r)) = g'(r) / (2 sqrt(g)),  g = r^(2/k) - r^((k+1)/k)
+    g_prime = (2.0 / k) * rs ** (2.0 / k - 1.0) - ((k + 1.0) / k) * rs ** (1.0 / k)
+    d_subsonic = C * g_prime / (2.0 * xp.maximum(root, 1e-300))
+    d_laminar = -C * _subsonic_root(R_LAMINAR, k) / (1.0 - R_LAMINAR)
+    d_dr = xp.where(r >= P_cr, xp.where(r > R_LAMINAR, d_laminar, d_subsonic), 0.0)
+    return A * d_dr        # A P_u d/dr * dr/dP_d, with dr/dP_d = 1 / P_u
 
 
 def signed_mass_flow(A, P_1, P_2, gas: Gas = Gas()):
@@ -52,3 +88,18 @@ def signed_mass_flow(A, P_1, P_2, gas: Gas = Gas()):
     P_u = xp.where(forward, P_1, P_2)
     P_d = xp.where(forward, P_2, P_1)
     return xp.where(forward, 1.0, -1.0) * mass_flow(A, P_u, P_d, gas)
+
+
+def signed_mass_flow_slope(A, P_1, P_2, gas: Gas = Gas()):
+    """d/dP_2 of :func:`signed_mass_flow` [kg/(s Pa)] at fixed ``P_1``: how the flow
+    from side 1 into side 2 changes with side 2's pressure (always <= 0)."""
+    forward = P_1 >= P_2
+    # forward: mdot = m(P_1, P_2), d/dP_2 = slope wrt the downstream pressure.
+    # reverse: mdot = -m(P_2, P_1);  m(P_u, P_d) = A P_u f(P_d / P_u), so
+    #   dm/dP_u = A f(r) - A r f'(r) = m / P_u - P_d * slope_d / P_u ... evaluated below.
+    P_u = xp.where(forward, P_1, P_2)
+    P_d = xp.where(forward, P_2, P_1)
+    m = mass_flow(A, P_u, P_d, gas)
+    slope_d = mass_flow_slope(A, P_u, P_d, gas)          # d m / d P_d
+    slope_u = m / P_u - slope_d * P_d / P_u               # d m / d P_u (m is homogeneous of degree 1)
+    return xp.where(forward, slope_d, -slope_u)

@@ -10,7 +10,7 @@ its own experiment contradicts; see ``docs/paper-errata.md``):
 from __future__ import annotations
 
 from . import _xp as xp
-from .orifice import signed_mass_flow
+from .orifice import signed_mass_flow, signed_mass_flow_slope
 from .params import Gas, Valve
 
 
@@ -38,3 +38,19 @@ def chamber_flows(u, p_a, p_b, valve: Valve = Valve(), gas: Gas = Gas()):
     port_a = xp.where(extend, valve.P_s, valve.P_e)
     port_b = xp.where(extend, valve.P_e, valve.P_s)
     return signed_mass_flow(A, port_a, p_a, gas), signed_mass_flow(A, port_b, p_b, gas)
+
+
+def chamber_flow_slopes(u, p_a, p_b, valve: Valve = Valve(), gas: Gas = Gas()):
+    """``(d mdot_a / d p_a, d mdot_b / d p_b)`` [kg/(s Pa)]: how each chamber's inflow
+    falls as its own pressure rises (both <= 0).
+
+    A co-simulation passes these with the flows so that the cylinder can integrate its
+    chambers against the valve's local linearisation instead of a held flow (the chamber
+    time constant, a few milliseconds, is close to the communication step).
+    """
+    A = orifice_area(u, valve)
+    extend = u < valve.u_centre
+    port_a = xp.where(extend, valve.P_s, valve.P_e)
+    port_b = xp.where(extend, valve.P_e, valve.P_s)
+    return (signed_mass_flow_slope(A, port_a, p_a, gas),
+            signed_mass_flow_slope(A, port_b, p_b, gas))

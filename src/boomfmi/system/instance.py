@@ -164,6 +164,11 @@ class FmuInstance:
                    communicationStepSize=dt)
         self.time += dt
 
+    def step_to(self, t: float, dt: float) -> None:
+        """One communication step of ``dt`` [s] from ``t`` (hot path, no bookkeeping)."""
+        self._call("fmi2DoStep", self.fmu.fmi2DoStep, self.fmu.component, t, dt, 1)
+        self.time = t + dt
+
     def close(self) -> None:
         """Terminate (when possible), free the instance and remove the extracted files."""
         if self._closed:

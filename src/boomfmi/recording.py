@@ -1,0 +1,198 @@
+"""Recordings: read, validate and write (``shared/spec/recording-format.md``).
+
+A recording is a UTF-8, comma-separated CSV with a header row and one row per sample:
+``t`` [s], ``u`` [V], ``p_a``, ``p_b`` [Pa gauge], ``alpha`` [rad], optionally
+``f_ext`` [N] and ``x`` [m]; other columns are kept.  A sidecar ``run.json`` beside
+``run.csv`` may override reference-rig values (``{"rig": {...}}``) and carry notes.
+
+:func:`read_recording` rejects a bad file with :class:`RecordingError`, whose message
+names the file, the line (the header is line 1) and the column.  It never drops rows.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .physics import reference_rig as rig
+
+REQUIRED = ("t", "u", "p_a", "p_b", "alpha")
+OPTIONAL = ("f_ext", "x")
+UNITS = {"t": "s", "u": "V", "p_a": "Pa (gauge)", "p_b": "Pa (gauge)", "alpha": "rad",
+         "f_ext": "N", "x": "m"}
+
+
+class RecordingError(ValueError):
+    """A recording that does not follow the recording format.
+
+    ``path``, ``row`` (the line number in the file, the header being line 1) and
+    ``column`` locate the fault where it has a place."""
+
+    def __init__(self, path, message: str, row: int | None = None, column: str | None = None):
+        self.path, self.row, self.column = Path(path), row, column
+        where = str(path)
+        if row is not None:
+            where += f", line {row}"
+        if column is not None:
+            where += f", column {column!r}"
+        super().__init__(f"{where}: {message}")
+
+
+@dataclass
+class Recording:
+    """A validated recording: ``data`` in SI units (pressures still gauge, as stored)."""
+    path: Path
+    data: pd.DataFrame
+    rig: dict = field(default_factory=dict)      #: reference-rig overrides from the sidecar
+    notes: str = ""
+
+    @property
+    def P_atm(self) -> float:
+        return float(self.rig.get("P_atm", rig.P_atm))
+
+
+def read_recording(path) -> Recording:
+    """Read and validate a recording and its sidecar; raise :class:`RecordingError`."""
+    path = Path(path)
+    if not path.is_file():
+        raise RecordingError(path, "no such file")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise RecordingError(path, f"not UTF-8 text ({e.reason} at byte {e.start})") from None
+    sidecar = _read_sidecar(path)
+    lines = text.splitlines()
+    if not lines or not lines[0].strip():
+        raise RecordingError(path, "empty file: no header row", row=1)
+    header = next(csv.reader([lines[0]]))
+    header = [h.strip() for h in header]
+    if len(header) == 1 and any(d in lines[0] for d in (";", "\t")):
+        delim = ";" if ";" in lines[0] else "tab"
+        raise RecordingError(path, f"the header is separated by {delim!r}, not by commas", row=1)
+    for col in REQUIRED:
+        if col not in header:
+            raise RecordingError(path, f"missing required column (the header has {', '.join(header)})",
+                                 row=1, column=col)
+    if len(set(header)) != len(header):
+        dup = next(h for h in header if header.count(h) > 1)
+        raise RecordingError(path, "the column appears twice", row=1, column=dup)
+    if len(lines) < 2:
+        raise RecordingError(path, "no samples after the header", row=2)
+
+    numeric = [c for c in header if c in REQUIRED or c in OPTIONAL]
+    rows = list(csv.reader(io.StringIO(text)))[1:]
+    values = {c: np.empty(len(rows)) for c in numeric}
+    index = {c: header.index(c) for c in header}
+    extra = {c: [] for c in header if c not in numeric}
+    for r, fields in enumerate(rows):
+        line = r + 2
+        if len(fields) != len(header):
+            raise RecordingError(path, f"{len(fields)} fields where the header has {len(header)}",
+                                 row=line)
+        for c in numeric:
+            raw = fields[index[c]].strip()
+            try:
+                v = float(raw)
+            except ValueError:
+                raise RecordingError(path, f"{raw!r} is not a number", row=line, column=c) from None
+            if not math.isfinite(v):
+                raise RecordingError(path, f"{raw!r} is not a finite number", row=line, column=c)
+            values[c][r] = v
+        for c in extra:
+            extra[c].append(fields[index[c]])
+
+    P_atm = float(sidecar.get("rig", {}).get("P_atm", rig.P_atm))
+    t = values["t"]
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise RecordingError(path, f"time does not increase ({t[i - 1]!r} s, then {t[i]!r} s)",
+                             row=i + 2, column="t")
+    u = values["u"]
+    bad = np.flatnonzero((u < rig.u_min) | (u > rig.u_max))
+    if bad.size:
+        i = int(bad[0])
+        raise RecordingError(path, f"command {u[i]!r} V lies outside 0 to 10 V", row=i + 2, column="u")
+    for c in ("p_a", "p_b"):
+        bad = np.flatnonzero(values[c] < -P_atm)
+        if bad.size:
+            i = int(bad[0])
+            raise RecordingError(path, f"gauge pressure {values[c][i]!r} Pa is below -P_atm = {-P_atm:g} Pa",
+                                 row=i + 2, column=c)
+    data = pd.DataFrame({c: values[c] for c in numeric})
+    for c, col in extra.items():
+        data[c] = col
+    data = data[header]
+    return Recording(path, data, rig=dict(sidecar.get("rig", {})), notes=str(sidecar.get("notes", "")))
+
+
+def _read_sidecar(path: Path) -> dict:
+    side = path.with_suffix(".json")
+    if not side.is_file():
+        return {}
+    try:
+        content = json.loads(side.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise RecordingError(side, f"the sidecar is not valid JSON: {e}") from None
+    if not isinstance(content, dict):
+        raise RecordingError(side, "the sidecar must hold a JSON object")
+    rig_over = content.get("rig", {})
+    if not isinstance(rig_over, dict):
+        raise RecordingError(side, "'rig' must be an object of reference-rig values")
+    for k, v in rig_over.items():
+        if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
+            raise RecordingError(side, f"rig value {k!r} must be a finite number, not {v!r}")
+    return content
+
+
+class RecordingWriter:
+    """Write a recording row by row, crash-safe: each row is flushed to the OS as it is
+    written, so a process killed mid-run leaves a file whose every row is complete."""
+
+    def __init__(self, path, columns=REQUIRED, sidecar: dict | None = None):
+        self.path = Path(path)
+        self.columns = list(columns)
+        for c in REQUIRED:
+            if c not in self.columns:
+                raise ValueError(f"a recording needs column {c!r}")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        if sidecar:
+            self.path.with_suffix(".json").write_text(json.dumps(sidecar, indent=2))
+        self._f = open(self.path, "w", encoding="utf-8", newline="")
+        self._f.write(",".join(self.columns) + "\n")
+        self._f.flush()
+
+    def write(self, row) -> None:
+        """Append one sample: a mapping by column name or a sequence in column order."""
+        if isinstance(row, dict):
+            row = [row[c] for c in self.columns]
+        self._f.write(",".join(repr(float(v)) for v in row) + "\n")
+        self._f.flush()
+
+    def close(self) -> None:
+        if not self._f.closed:
+            self._f.flush()
+            os.fsync(self._f.fileno())
+            self._f.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def write_recording(path, data: pd.DataFrame, sidecar: dict | None = None) -> Path:
+    """Write a whole DataFrame as a recording (the required columns first)."""
+    cols = [c for c in REQUIRED if c in data] + [c for c in data.columns if c not in REQUIRED]
+    with RecordingWriter(path, cols, sidecar) as w:
+        for row in data[cols].itertuples(index=False):
+            w.write(row)
+    return Path(path)

@@ -1,0 +1,411 @@
+"""A fixed-step co-simulation master for SSP systems, on fmpy's FMU instances.
+
+Everything the master wires comes from the SSP: components, connections (with their
+linear transformations) and parameter bindings.  What it adds over
+``fmpy.ssp.simulate_ssp`` (FMPy issues #15, #234, #704): parameter bindings are
+applied at system and component level (an unknown name is an error), linear
+transformations are applied on every connection, the FMUs start from their own start
+values, and every result row is stamped with the time its values belong to, starting
+with a row at t0.
+
+Inputs that no connection drives (``valve.u``, ``boom_load.f_ext``) and the system's
+own input connectors are the run's inputs: they take the values given to
+:meth:`CoSimulation.simulate`, or keep their start values.
+
+Time is kept as an integer number of nanoseconds, as libcosim does, so that long runs
+do not drift and the step sizes handed to the FMUs are those libcosim hands them.
+
+Algorithms, for each step from t_k to t_(k+1):
+
+* **Jacobi** (libcosim's fixed-step algorithm): every component takes the inputs
+  transferred after the previous step, all step, and then all outputs are read and
+  transferred.  A direct-feedthrough output (the valve's flows) is thus seen by its
+  consumers one step late.
+* **Gauss-Seidel**: the components step one after another, each taking the newest
+  outputs of those before it.  The order comes from the connection graph and the
+  declared output dependencies: a component whose feedthrough outputs feed another
+  steps first (strict; a feedthrough cycle is an algebraic loop and is refused), and
+  among the rest those with fewer unmet inputs first, then SSD order.
+
+Each row at t_k holds state outputs after the step to t_k and feedthrough outputs
+evaluated with the inputs at t_k (the master sets those inputs and reads the outputs
+again before recording), so every value in a row belongs to t_k.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import tempfile
+import time as _time
+from pathlib import Path
+from typing import Callable, Mapping
+
+import numpy as np
+import pandas as pd
+
+from .instance import FmuInstance
+from .ssp import SYSTEM, SystemStructure, check_against_fmus, read_ssp
+from .ssv import Parameter, SspError, read_ssv
+
+ALGORITHMS = ("gauss-seidel", "jacobi")
+NS_PER_S = 1_000_000_000
+
+
+class _Progress:
+    """A progress bar on stderr, shown only once a run has taken more than a second."""
+
+    def __init__(self, total: float, enabled: bool):
+        self.total, self.enabled = total, enabled
+        self.start = _time.perf_counter()
+        self.last = 0.0
+        self.shown = False
+
+    def update(self, done: float) -> None:
+        if not self.enabled:
+            return
+        now = _time.perf_counter()
+        if now - self.start < 1.0 or now - self.last < 0.1:
+            return
+        self.last, self.shown = now, True
+        share = min(done / self.total, 1.0) if self.total > 0 else 1.0
+        rate = done / (now - self.start)
+        sys.stderr.write(f"\r[{'#' * int(30 * share):<30}] {100 * share:5.1f}%  "
+                         f"t = {done:7.3f} s  ({rate:5.1f} x real time)")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.shown:
+            sys.stderr.write("\n")
+
+
+class CoSimulation:
+    """An SSP system ready to run.
+
+    Parameters
+    ----------
+    ssp : path of a ``.ssp`` archive (or a folder laid out like one).
+    step : communication step [s].
+    algorithm : ``"gauss-seidel"`` (default) or ``"jacobi"``.
+    parameters : further parameter sets applied after the SSP's own bindings: paths of
+        ``.ssv`` files (hierarchical names, ``valve.A_max``) and/or mappings.
+    """
+
+    def __init__(self, ssp, step: float, algorithm: str = "gauss-seidel", parameters=None):
+        if algorithm not in ALGORITHMS:
+            raise ValueError(f"algorithm must be one of {', '.join(ALGORITHMS)}, not {algorithm!r}")
+        if not (isinstance(step, (int, float)) and math.isfinite(step) and step > 0):
+            raise ValueError(f"the communication step must be > 0 s, not {step!r}")
+        self.step_ns = int(round(step * NS_PER_S))
+        if self.step_ns < 1:
+            raise ValueError(f"the communication step {step} s is below a nanosecond")
+        self.algorithm = algorithm
+        self.structure: SystemStructure = read_ssp(ssp)
+        for extra in _as_list(parameters):
+            if isinstance(extra, Mapping):
+                self.structure.bind({n: Parameter(n, _ptype(v), v) for n, v in extra.items()},
+                                    "parameters given to the master")
+            else:
+                path = Path(extra)
+                if not path.is_file():
+                    raise SspError(f"{path}: no such parameter set")
+                self.structure.bind(read_ssv(path.read_bytes(), str(path)), str(path))
+        self._tmp = tempfile.TemporaryDirectory(prefix="boomfmi_ssp_")
+        self.instances: dict[str, FmuInstance] = {}
+        try:
+            for name, comp in self.structure.components.items():
+                fmu_path = Path(self._tmp.name) / f"{name}.fmu"
+                fmu_path.write_bytes(self.structure.read(comp.source))
+                self.instances[name] = FmuInstance(fmu_path, name=name)
+            check_against_fmus(self.structure, {n: i.model_description for n, i in self.instances.items()})
+            self._wire()
+        except BaseException:
+            self.close()
+            raise
+
+    @property
+    def step_size(self) -> float:
+        return self.step_ns / NS_PER_S
+
+    # -- wiring --------------------------------------------------------------------------
+    def _wire(self) -> None:
+        s = self.structure
+        names = list(self.instances)
+        slot: dict[tuple[str, str], int] = {}
+
+        def slot_of(element: str, connector: str) -> int:
+            return slot.setdefault((element, connector), len(slot))
+
+        # every Real output of every component has a slot (they are all recorded)
+        self.outputs: dict[str, list[str]] = {}
+        self.feedthrough: dict[str, set[str]] = {}
+        for n in names:
+            md = self.instances[n].model_description
+            self.outputs[n] = [u.variable.name for u in md.outputs if u.variable.type == "Real"]
+            self.feedthrough[n] = {u.variable.name for u in md.outputs
+                                   if u.dependencies and u.variable.type == "Real"}
+            for o in self.outputs[n]:
+                slot_of(n, o)
+        driven = {(c.end_element, c.end_connector) for c in s.connections if c.end_element}
+        # the run's inputs: system input connectors, and component inputs nothing drives
+        self.inputs: list[str] = [c for c, kind in s.connectors.items() if kind in ("input", "parameter")]
+        free: dict[str, list[str]] = {n: [] for n in names}
+        for n in names:
+            for v in self.instances[n].model_description.modelVariables:
+                if v.causality == "input" and v.type == "Real" and (n, v.name) not in driven:
+                    free[n].append(v.name)
+                    self.inputs.append(f"{n}.{v.name}")
+        self._input_slot = {}
+        for name in self.inputs:
+            element, _, connector = name.rpartition(".")
+            self._input_slot[name] = slot_of(element, connector)
+
+        incoming: dict[str, dict[str, tuple[int, float, float]]] = {n: {} for n in names}
+        for n in names:
+            for v in free[n]:
+                incoming[n][v] = (slot[(n, v)], 1.0, 0.0)
+        self.system_outputs: dict[str, tuple[int, float, float]] = {}
+        for conn in s.connections:
+            src = slot.get((conn.start_element, conn.start_connector))
+            if src is None:
+                raise SspError(f"{s.path}: connection {conn.describe()}: "
+                               f"{conn.start_connector} is not a Real output")
+            if conn.end_element == SYSTEM:
+                self.system_outputs[conn.end_connector] = (src, conn.factor, conn.offset)
+            elif conn.end_connector in incoming[conn.end_element]:
+                raise SspError(f"{s.path}: input {conn.end_element}.{conn.end_connector} "
+                               f"has more than one incoming connection")
+            else:
+                incoming[conn.end_element][conn.end_connector] = (src, conn.factor, conn.offset)
+        self.n_slots = len(slot)
+        self._slot = slot
+        self._in = {n: (self.instances[n].value_references(list(incoming[n])), list(incoming[n].values()))
+                    for n in names}
+        feed = {n: [o for o in self.outputs[n] if o in self.feedthrough[n]] for n in names}
+        self._feed_out = {n: (self.instances[n].value_references(feed[n]), [slot[(n, o)] for o in feed[n]])
+                          for n in names}
+        self._all_out = {n: (self.instances[n].value_references(self.outputs[n]),
+                             [slot[(n, o)] for o in self.outputs[n]]) for n in names}
+        feed_edges = {n: set() for n in names}
+        soft_edges = {n: set() for n in names}
+        for conn in s.connections:
+            a, b = conn.start_element, conn.end_element
+            if a and b and a != b:
+                (feed_edges if conn.start_connector in self.feedthrough[a] else soft_edges)[a].add(b)
+        self.step_order = _order(names, feed_edges, soft_edges, str(s.path))
+        self._feed_components = [n for n in self.step_order if self._feed_out[n][0]]
+
+    # -- running -------------------------------------------------------------------------
+    def _set_inputs(self, name: str, values: list[float]) -> None:
+        vrs, sources = self._in[name]
+        if vrs:
+            self.instances[name].set_real(vrs, [f * values[i] + o for i, f, o in sources])
+
+    def _read(self, name: str, which: dict, values: list[float]) -> None:
+        vrs, slots = which[name]
+        if vrs:
+            for i, v in zip(slots, self.instances[name].get_real(vrs)):
+                values[i] = v
+
+    def simulate(self, stop_time: float | None = None, inputs=None, start_time: float | None = None,
+                 progress: bool = False) -> pd.DataFrame:
+        """Run from the start time to ``stop_time`` [s]; return one row per
+        communication point, t0 included.
+
+        ``inputs`` drives the run's inputs (``valve.u``, or a system connector's name):
+        a mapping of constants, a callable ``inputs(t) -> {name: value}``, or a
+        DataFrame with a ``t`` (or ``time``) column whose rows hold from their time to
+        the next.  An input not given keeps its start value.
+        """
+        s = self.structure
+        t0 = s.start_time if start_time is None else float(start_time)
+        t_end = s.stop_time if stop_time is None else float(stop_time)
+        if t_end is None:
+            raise ValueError("no stop time: give one (the SSD has no DefaultExperiment stopTime)")
+        t0_ns = int(round(t0 * NS_PER_S))
+        n_steps = int(round((t_end - t0) * NS_PER_S / self.step_ns))
+        if n_steps < 1:
+            raise ValueError(f"stop time {t_end} s leaves no step of {self.step_size} s after {t0} s")
+        source = _input_source(inputs, self.inputs)
+
+        by_comp: dict[str, dict] = {n: {} for n in self.instances}
+        for name, p in s.parameters.items():
+            element, _, var = name.partition(".")
+            by_comp[element][var] = p.value
+        for n, inst in self.instances.items():
+            inst.initialize(by_comp[n], start_time=t0, stop_time=t_end)
+
+        values = [0.0] * self.n_slots
+        for name, i in self._input_slot.items():
+            values[i] = self._input_start(name)
+        for n in self.instances:
+            self._read(n, self._all_out, values)
+        columns, record = self._recording()
+        rows = np.empty((n_steps + 1, len(columns)))
+        bar = _Progress(t_end - t0, progress)
+        input_slots = [(name, self._input_slot[name]) for name in self.inputs]
+        feed_buffer = list(values)
+
+        def take_inputs(t: float) -> None:
+            given = source(t)
+            for name, i in input_slots:
+                if name in given:
+                    values[i] = float(given[name])
+
+        def record_row(k: int, t: float) -> None:
+            # feedthrough outputs at t, from the inputs at t; Jacobi keeps them out of
+            # the transfer (they reach consumers after the next step, as in libcosim)
+            row_values = values
+            if self._feed_components:
+                if self.algorithm == "jacobi":
+                    feed_buffer[:] = values
+                    row_values = feed_buffer
+                for n in self._feed_components:
+                    self._set_inputs(n, row_values)
+                    self._read(n, self._feed_out, row_values)
+            rows[k, 0] = t
+            for j, (i, f, o) in enumerate(record, start=1):
+                rows[k, j] = f * row_values[i] + o
+
+        take_inputs(t0)
+        record_row(0, t0)
+        order = self.step_order
+        instances = self.instances
+        try:
+            for k in range(n_steps):
+                t_k = (t0_ns + k * self.step_ns) / NS_PER_S
+                t_next = (t0_ns + (k + 1) * self.step_ns) / NS_PER_S
+                dt = t_next - t_k
+                if self.algorithm == "jacobi":
+                    for n in order:
+                        self._set_inputs(n, values)
+                    for n in order:
+                        instances[n].step_to(t_k, dt)
+                    for n in order:
+                        self._read(n, self._all_out, values)
+                else:
+                    for n in order:
+                        self._set_inputs(n, values)
+                        instances[n].step_to(t_k, dt)
+                        self._read(n, self._all_out, values)
+                take_inputs(t_next)
+                record_row(k + 1, t_next)
+                bar.update(t_next - t0)
+        finally:
+            bar.close()
+        return pd.DataFrame(rows, columns=columns)
+
+    def _input_start(self, name: str) -> float:
+        element, _, connector = name.rpartition(".")
+        if element:
+            var = self.instances[element].variables[connector]
+            return float(var.start) if var.start is not None else 0.0
+        for conn in self.structure.connections:
+            if conn.start_element == SYSTEM and conn.start_connector == connector and conn.end_element:
+                var = self.instances[conn.end_element].variables[conn.end_connector]
+                start = float(var.start) if var.start is not None else 0.0
+                return (start - conn.offset) / conn.factor if conn.factor else 0.0
+        return 0.0
+
+    def _recording(self):
+        """Columns: time, the run's inputs, system outputs, then every component output."""
+        columns, record = ["time"], []
+        for name in self.inputs:
+            columns.append(name)
+            record.append((self._input_slot[name], 1.0, 0.0))
+        for c, (i, f, o) in self.system_outputs.items():
+            columns.append(c)
+            record.append((i, f, o))
+        for n in self.instances:
+            for o in self.outputs[n]:
+                columns.append(f"{n}.{o}")
+                record.append((self._slot[(n, o)], 1.0, 0.0))
+        return columns, record
+
+    def close(self) -> None:
+        for inst in self.instances.values():
+            inst.close()
+        self.instances = {}
+        self._tmp.cleanup()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def simulate_ssp(ssp, stop_time=None, step: float = 1e-3, algorithm: str = "gauss-seidel",
+                 inputs=None, parameters=None, progress: bool = False) -> pd.DataFrame:
+    """Load, run and close an SSP system in one call (see :class:`CoSimulation`)."""
+    with CoSimulation(ssp, step, algorithm, parameters) as cosim:
+        return cosim.simulate(stop_time, inputs, progress=progress)
+
+
+def _as_list(parameters) -> list:
+    if parameters is None:
+        return []
+    if isinstance(parameters, (str, Path, Mapping)):
+        return [parameters]
+    return list(parameters)
+
+
+def _ptype(value) -> str:
+    if isinstance(value, bool):
+        return "Boolean"
+    if isinstance(value, int):
+        return "Integer"
+    if isinstance(value, float):
+        return "Real"
+    return "String"
+
+
+def _order(names: list[str], strict: dict[str, set[str]], soft: dict[str, set[str]],
+           where: str) -> list[str]:
+    """Gauss-Seidel order: topological over ``strict`` (feedthrough) edges, a cycle
+    there being an algebraic loop; ties go to the element with fewest unmet ``soft``
+    inputs, then to SSD order."""
+    hard_in = {n: 0 for n in names}
+    soft_in = {n: 0 for n in names}
+    for a in names:
+        for b in strict[a]:
+            hard_in[b] += 1
+        for b in soft[a]:
+            soft_in[b] += 1
+    order, left = [], list(names)
+    while left:
+        ready = [n for n in left if hard_in[n] == 0]
+        if not ready:
+            raise SspError(f"{where}: algebraic loop through direct feedthrough among {', '.join(left)}")
+        n = min(ready, key=lambda m: (soft_in[m], names.index(m)))
+        order.append(n)
+        left.remove(n)
+        for b in strict[n]:
+            hard_in[b] -= 1
+        for b in soft[n]:
+            soft_in[b] -= 1
+    return order
+
+
+def _input_source(inputs, names: list[str]) -> Callable[[float], Mapping[str, float]]:
+    if inputs is None:
+        return lambda t: {}
+    if isinstance(inputs, pd.DataFrame):
+        tcol = "t" if "t" in inputs.columns else "time"
+        times = inputs[tcol].to_numpy(dtype=float)
+        cols = {c: inputs[c].to_numpy(dtype=float) for c in names if c in inputs.columns}
+        if not cols:
+            raise ValueError(f"the input table has none of the system's inputs {names}")
+
+        def held(t: float) -> dict[str, float]:
+            i = max(int(np.searchsorted(times, t + 1e-9, side="right")) - 1, 0)
+            return {c: v[i] for c, v in cols.items()}
+        return held
+    if isinstance(inputs, Mapping):
+        const = dict(inputs)
+        unknown = set(const) - set(names)
+        if unknown:
+            raise ValueError(f"the system has no free input {sorted(unknown)}; its inputs: {names}")
+        return lambda t: const
+    if callable(inputs):
+        return inputs
+    raise TypeError(f"inputs must be a mapping, a callable or a DataFrame, not {type(inputs).__name__}")
