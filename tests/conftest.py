@@ -26,7 +26,9 @@ def fmu_dir() -> Path:
         return Path(os.environ["BOOMFMI_FMU_DIR"])
     out = ROOT / "build" / "fmus"
     fmus = [out / f"{n}.fmu" for n in FMU_NAMES]
-    if not all(f.is_file() for f in fmus) or any(_sources_newer_than(f) for f in fmus):
+    ssp = out.parent / "excavator_boom.ssp"
+    if (not all(f.is_file() for f in fmus) or any(_sources_newer_than(f) for f in fmus)
+            or not ssp.is_file() or ROOT.joinpath("ssp", "SystemStructure.ssd").stat().st_mtime > ssp.stat().st_mtime):
         subprocess.run([sys.executable, str(ROOT / "build_fmus.py")], check=True, cwd=ROOT)
     return out
 
@@ -37,3 +39,29 @@ def fmu(fmu_dir):
     def path(name: str) -> Path:
         return fmu_dir / f"{name}.fmu"
     return path
+
+
+@pytest.fixture(scope="session")
+def ssp_path(fmu_dir) -> Path:
+    """The packed boom system, build/excavator_boom.ssp (built with the FMUs)."""
+    path = fmu_dir.parent / "excavator_boom.ssp"
+    if not path.is_file():
+        subprocess.run([sys.executable, str(ROOT / "build_fmus.py")], check=True, cwd=ROOT)
+    return path
+
+
+def rewrite_ssp(src: Path, dst: Path, edit=None, drop=(), add=None) -> Path:
+    """Copy an SSP, passing SystemStructure.ssd's text through ``edit``, leaving out the
+    members in ``drop`` and adding ``add`` ({member: bytes})."""
+    import zipfile
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w") as zout:
+        for item in zin.infolist():
+            if item.filename in drop:
+                continue
+            data = zin.read(item.filename)
+            if item.filename == "SystemStructure.ssd" and edit is not None:
+                data = edit(data.decode()).encode()
+            zout.writestr(item, data)
+        for name, data in (add or {}).items():
+            zout.writestr(name, data)
+    return dst

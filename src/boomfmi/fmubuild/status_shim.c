@@ -53,8 +53,12 @@ typedef struct {
     X(fmi2GetStatus) X(fmi2GetRealStatus) X(fmi2GetIntegerStatus)                    \
     X(fmi2GetBooleanStatus) X(fmi2GetStringStatus)
 
-/* pythonfmu's functions, looked up once when the first instance is made. */
+/* pythonfmu's functions, looked up when the first instance is made.  The library is
+ * closed again when the last live instance is freed, as a host closing pythonfmu's own
+ * library would: left loaded past its host's dlclose, its static destructors would run
+ * at process exit, after the interpreter they belong to has gone. */
 static void *inner_lib = NULL;
+static int live_instances = 0;
 static struct {
 #define DECLARE(fn) fn##TYPE *fn;
     FMI2_CS_FUNCTIONS(DECLARE)
@@ -69,6 +73,7 @@ static int load_inner(void) {
     const char *slash;
     size_t dir_len;
     if (inner_lib) return 1;
+    memset(&inner, 0, sizeof inner);
     if (!dladdr((void *)&load_inner, &info) || !info.dli_fname) return 0;
     slash = strrchr(info.dli_fname, '/');
     dir_len = slash ? (size_t)(slash - info.dli_fname) + 1 : 0;
@@ -82,7 +87,11 @@ static int load_inner(void) {
         memcpy(path + dir_len, base, base_len);
         strcpy(path + dir_len + base_len, INNER_SUFFIX);
     }
-    inner_lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    /* RTLD_GLOBAL, as hosts commonly load pythonfmu's library itself: every copy of
+     * pythonfmu in the process then shares one set of its C++ globals (the interpreter
+     * state).  With RTLD_LOCAL, a process that ran the FMUs in libcosim and then in
+     * fmpy aborted at exit with a corrupted heap. */
+    inner_lib = dlopen(path, RTLD_NOW | RTLD_GLOBAL);
     if (!inner_lib) return 0;
 #define LOOKUP(fn) inner.fn = (fn##TYPE *)dlsym(inner_lib, #fn);
     FMI2_CS_FUNCTIONS(LOOKUP)
@@ -157,13 +166,21 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         free(s);
         return NULL;
     }
+    live_instances++;
     return (fmi2Component)s;
 }
 
 void fmi2FreeInstance(fmi2Component c) {
     Shim *s = (Shim *)c;
     if (!s) return;
-    if (!s->dead) INNER(fmi2FreeInstance)(s->inner);
+    if (!s->dead) {
+        /* a dead instance is left to leak: pythonfmu has already released its object */
+        INNER(fmi2FreeInstance)(s->inner);
+        if (--live_instances == 0 && inner_lib) {
+            dlclose(inner_lib);
+            inner_lib = NULL;
+        }
+    }
     free(s->name);
     free(s);
 }

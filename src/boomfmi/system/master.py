@@ -189,8 +189,14 @@ class CoSimulation:
         soft_edges = {n: set() for n in names}
         for conn in s.connections:
             a, b = conn.start_element, conn.end_element
-            if a and b and a != b:
-                (feed_edges if conn.start_connector in self.feedthrough[a] else soft_edges)[a].add(b)
+            if not (a and b):
+                continue
+            through = conn.start_connector in self.feedthrough[a]
+            if a == b and through:
+                raise SspError(f"{s.path}: algebraic loop: {conn.describe()} feeds {a}'s "
+                               f"direct-feedthrough output back into its own input")
+            if a != b:
+                (feed_edges if through else soft_edges)[a].add(b)
         self.step_order = _order(names, feed_edges, soft_edges, str(s.path))
         self._feed_components = [n for n in self.step_order if self._feed_out[n][0]]
 

@@ -1,0 +1,132 @@
+#!/usr/bin/env python3
+"""Co-simulation error against the monolithic reference, on the paper's experiment.
+
+For communication steps of 0.1, 0.25, 0.5, 1 and 2 ms, runs build/excavator_boom.ssp
+through boomfmi's master and prints the NRMSE (RMS error over the reference's range)
+of x, p_a and p_b against the monolithic scipy solution (LSODA, rtol 1e-9) of the same
+physics.  Two couplings of valve and cylinder are compared:
+
+* explicit: the cylinder holds the valve's flows over each step (the SSD without the
+  dmdot/dp connections);
+* linearised: the valve also passes each flow's slope with respect to its chamber's
+  pressure, and the cylinder integrates against that linearisation (the shipped SSD).
+
+Writes the tables to docs/cosim-accuracy.md.
+
+    python benchmarks/cosim_accuracy.py [--out docs/cosim-accuracy.md]
+"""
+from __future__ import annotations
+
+import argparse
+import platform
+import re
+import sys
+import tempfile
+import time
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+
+from boomfmi.experiments import paper_multistep  # noqa: E402
+from boomfmi.reference import Model, simulate_reference  # noqa: E402
+from boomfmi.system import simulate_ssp  # noqa: E402
+
+STEPS = (1e-4, 2.5e-4, 5e-4, 1e-3, 2e-3)
+CHANNELS = (("x", "boom_load.x"), ("p_a", "cylinder.p_a"), ("p_b", "cylinder.p_b"))
+
+
+def explicit_variant(ssp: Path, out: Path) -> Path:
+    """A copy of the SSP without the valve's slope connections (held flows)."""
+    with zipfile.ZipFile(ssp) as src, zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as dst:
+        for item in src.infolist():
+            data = src.read(item.filename)
+            if item.filename == "SystemStructure.ssd":
+                text = data.decode()
+                text, n = re.subn(r'\s*<ssd:Connection startElement="valve" startConnector="dmdot_[ab]_dp_[ab]"[^>]*/>', "", text)
+                assert n == 2, "expected two slope connections in the SSD"
+                data = text.encode()
+            dst.writestr(item, data)
+    return out
+
+
+def nrmse(co, ref) -> dict[str, float]:
+    r = ref.set_index(np.round(ref["time"].to_numpy(), 7))
+    c = co.set_index(np.round(co["time"].to_numpy(), 7))
+    idx = r.index.intersection(c.index)
+    out = {}
+    for name, col in CHANNELS:
+        err = c.loc[idx, col].to_numpy() - r.loc[idx, name].to_numpy()
+        out[name] = float(np.sqrt(np.mean(err**2)) / (r[name].max() - r[name].min()))
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--ssp", type=Path, default=ROOT / "build" / "excavator_boom.ssp")
+    ap.add_argument("--out", type=Path, default=ROOT / "docs" / "cosim-accuracy.md")
+    ap.add_argument("--algorithms", default="gauss-seidel,jacobi")
+    args = ap.parse_args(argv)
+
+    profile = paper_multistep()
+    stop = profile.duration
+    t = time.perf_counter()
+    ref = simulate_reference(Model(), profile, stop, breakpoints=[1, 3, 4, 6, 7])
+    print(f"reference: LSODA rtol 1e-9, {stop:g} s in {time.perf_counter() - t:.2f} s wall")
+
+    tables = []
+    with tempfile.TemporaryDirectory() as tmp:
+        variants = {"explicit (held flows)": explicit_variant(args.ssp, Path(tmp) / "explicit.ssp"),
+                    "linearised (flow slopes)": args.ssp}
+        for algorithm in args.algorithms.split(","):
+            for coupling, ssp in variants.items():
+                rows = []
+                for h in STEPS:
+                    t = time.perf_counter()
+                    co = simulate_ssp(ssp, stop_time=stop, step=h, algorithm=algorithm,
+                                      inputs=lambda s: {"valve.u": profile(s)["u"]})
+                    wall = time.perf_counter() - t
+                    e = nrmse(co, ref)
+                    rows.append((h, e, wall))
+                    print(f"{algorithm:12s} {coupling:26s} h = {h * 1e3:5.2f} ms  "
+                          + "  ".join(f"{k} {100 * v:7.4f} %" for k, v in e.items())
+                          + f"   ({stop / wall:5.1f} x real time)")
+                tables.append((algorithm, coupling, rows))
+
+    lines = ["# Co-simulation accuracy", "",
+             "NRMSE (RMS error divided by the reference's range) of the co-simulated piston",
+             "position x and chamber pressures p_a, p_b against the monolithic reference",
+             "(`boomfmi.reference`: the same physics functions as one ODE, scipy LSODA,",
+             "rtol 1e-9, events for stick/slip and the end stops), on the paper's experiment",
+             "(`paper_multistep`, 9 s), for the build/excavator_boom.ssp of this commit.",
+             "Made by `python benchmarks/cosim_accuracy.py` on "
+             f"{platform.machine()} / Python {platform.python_version()}.", "",
+             "**Before**: explicit coupling, the cylinder holds the valve's flows over each",
+             "step. **After**: the valve also passes each flow's slope with respect to its",
+             "chamber's pressure (`dmdot_a_dp_a`, `dmdot_b_dp_b`), and the cylinder",
+             "integrates its chambers against that linearisation (exponential integrator).",
+             "Near equilibrium the chamber's time constant falls below a millisecond",
+             "(the orifice's laminar region, `physics/orifice.py`), which the held flows",
+             "turn into a step-to-step oscillation of the pressure.", ""]
+    for algorithm, coupling, rows in tables:
+        lines += [f"## {algorithm}, {coupling}", "",
+                  "| step [ms] | x | p_a | p_b | real-time factor |", "|---|---|---|---|---|"]
+        for h, e, wall in rows:
+            lines.append(f"| {h * 1e3:g} | {100 * e['x']:.4f} % | {100 * e['p_a']:.4f} % | "
+                         f"{100 * e['p_b']:.4f} % | {stop / wall:.1f} |")
+        lines.append("")
+    gs = next(r for a, c, r in tables if a == "gauss-seidel" and c.startswith("linearised"))
+    at_1ms = next(e for h, e, _ in gs if abs(h - 1e-3) < 1e-12)
+    verdict = "below" if max(at_1ms.values()) < 0.01 else "NOT below"
+    lines += [f"At 1 ms with the shipped coupling and Gauss-Seidel every channel is {verdict} 1 % "
+              f"(worst: {100 * max(at_1ms.values()):.4f} %).", ""]
+    args.out.write_text("\n".join(lines))
+    print(f"wrote {args.out}")
+    return 0 if verdict == "below" else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,119 @@
+#!/usr/bin/env python3
+"""Real-time factor of the full boom at a 1 ms step, and its FMI-call floor.
+
+Runs build/excavator_boom.ssp (Gauss-Seidel, 1 ms) over 10 simulated seconds of the
+paper's command profile and prints the real-time factor (simulated seconds per wall
+second).  Then runs the same system with every FMU replaced by a "null" FMU built the
+same way (pythonfmu, boomfmi's base class and status shim, the same variables and
+dependencies, so the master makes exactly the same set/step/get calls) whose step and
+outputs compute nothing.  The ratio of the two wall times says how much of the run is
+the model's own work and how much the FMI call path (fmpy -> shim -> pythonfmu ->
+Python).  Each figure is the best of --repeat runs, pinned to one core.
+
+    python benchmarks/cosim_speed.py [--repeat 3]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import tempfile
+import time
+import zipfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+
+from fmpy import read_model_description  # noqa: E402
+
+from boomfmi.experiments import paper_multistep  # noqa: E402
+from boomfmi.fmubuild import build_fmu  # noqa: E402
+from boomfmi.system import CoSimulation  # noqa: E402
+
+NULL_SCRIPT = '''"""null_{name}: the interface of {name}, computing nothing (benchmark floor)."""
+from boomfmi_null_{name}_lib.fmislave import BoomSlave, Variable
+
+
+class Null{cls}(BoomSlave):
+    description = "computes nothing: the FMI-call floor of {name}"
+    variables = {variables!r}
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.modelName = "null_{name}"
+
+    def step(self, t, dt):
+        pass
+'''
+
+
+def null_fmu(fmu: Path, workdir: Path) -> Path:
+    """Build a null FMU with the same variables and dependencies as ``fmu``."""
+    md = read_model_description(str(fmu))
+    deps = {u.variable.name: tuple(d.name for d in u.dependencies) for u in md.outputs}
+    from boomfmi.fmislave import Variable
+    variables = []
+    for v in md.modelVariables:
+        start = float(v.start) if v.start is not None else (1.0e5 if v.unit == "Pa" else 0.0)
+        variables.append(Variable(v.name, v.causality, v.unit or "1", v.description, start,
+                                  None, None, "Real", deps.get(v.name, ())))
+    name = md.coSimulation.modelIdentifier
+    folder = workdir / f"null_{name}"
+    folder.mkdir()
+    script = NULL_SCRIPT.format(name=name, cls=name.title().replace("_", ""),
+                                variables=tuple(variables))
+    script = script.replace("Variable(name=", "Variable(").replace("boomfmi.fmislave.", "")
+    (folder / f"null_{name}_fmu.py").write_text(script)
+    return build_fmu(folder, workdir / "built")
+
+
+def null_ssp(ssp: Path, workdir: Path) -> Path:
+    """The same SSP with each component's FMU replaced by its null twin."""
+    out = workdir / "null.ssp"
+    with zipfile.ZipFile(ssp) as src, zipfile.ZipFile(out, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item.filename)
+            if item.filename.endswith(".fmu"):
+                tmp = workdir / Path(item.filename).name
+                tmp.write_bytes(data)
+                data = null_fmu(tmp, workdir).read_bytes()
+            dst.writestr(item, data)
+    return out
+
+
+def best_wall(ssp: Path, stop: float, repeat: int) -> float:
+    profile = paper_multistep()
+    walls = []
+    for _ in range(repeat):
+        with CoSimulation(ssp, 1e-3, "gauss-seidel") as cosim:
+            t = time.perf_counter()
+            cosim.simulate(stop, lambda s: {"valve.u": profile(s % profile.duration)["u"]})
+            walls.append(time.perf_counter() - t)
+    return min(walls)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--ssp", type=Path, default=ROOT / "build" / "excavator_boom.ssp")
+    ap.add_argument("--stop", type=float, default=10.0)
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args(argv)
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    with tempfile.TemporaryDirectory() as tmp:
+        floor_ssp = null_ssp(args.ssp, Path(tmp))
+        full = best_wall(args.ssp, args.stop, args.repeat)
+        floor = best_wall(floor_ssp, args.stop, args.repeat)
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, one core")
+    print(f"full system, 1 ms step, {args.stop:g} s simulated: {full:.3f} s wall, "
+          f"real-time factor {args.stop / full:.1f}")
+    print(f"FMI-call floor (null FMUs, same calls):   {floor:.3f} s wall, "
+          f"real-time factor {args.stop / floor:.1f}")
+    print(f"ratio full / floor: {full / floor:.2f} (the model's work is {100 * (1 - floor / full):.0f} % of the run)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
