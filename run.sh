@@ -7,3 +7,4 @@ mkdir -p out
 .venv/bin/boomfmi check build/fmus
 .venv/bin/boomfmi describe build/fmus/*.fmu > out/fmu-interfaces.md
 echo "wrote out/fmu-interfaces.md"
+.venv/bin/boomfmi simulate build/excavator_boom.ssp --experiment paper_multistep --step 0.001 --out out/paper_multistep.csv

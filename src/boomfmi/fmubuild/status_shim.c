@@ -53,10 +53,13 @@ typedef struct {
     X(fmi2GetStatus) X(fmi2GetRealStatus) X(fmi2GetIntegerStatus)                    \
     X(fmi2GetBooleanStatus) X(fmi2GetStringStatus)
 
-/* pythonfmu's functions, looked up when the first instance is made.  The library is
- * closed again when the last live instance is freed, as a host closing pythonfmu's own
- * library would: left loaded past its host's dlclose, its static destructors would run
- * at process exit, after the interpreter they belong to has gone. */
+/* pythonfmu's functions, looked up when the first instance is made.  pythonfmu's
+ * library is closed when the host closes this one (unload_inner), so that it lives
+ * exactly as long as in a host that loaded it directly.  Left loaded past that, its
+ * static destructors ran at process exit, after the interpreter they belong to: a
+ * process that ran the FMUs in libcosim and then in fmpy aborted with a corrupted
+ * heap.  Closed any earlier (with the last instance), it finalised the interpreter
+ * under the other FMUs of a non-Python host (ecos segfaulted at exit). */
 static void *inner_lib = NULL;
 static int live_instances = 0;
 static struct {
@@ -87,11 +90,7 @@ static int load_inner(void) {
         memcpy(path + dir_len, base, base_len);
         strcpy(path + dir_len + base_len, INNER_SUFFIX);
     }
-    /* RTLD_GLOBAL, as hosts commonly load pythonfmu's library itself: every copy of
-     * pythonfmu in the process then shares one set of its C++ globals (the interpreter
-     * state).  With RTLD_LOCAL, a process that ran the FMUs in libcosim and then in
-     * fmpy aborted at exit with a corrupted heap. */
-    inner_lib = dlopen(path, RTLD_NOW | RTLD_GLOBAL);
+    inner_lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
     if (!inner_lib) return 0;
 #define LOOKUP(fn) inner.fn = (fn##TYPE *)dlsym(inner_lib, #fn);
     FMI2_CS_FUNCTIONS(LOOKUP)
@@ -135,6 +134,15 @@ static fmi2Status finish(Shim *s, fmi2Status st) {
     }                                                                               \
     s->worst = fmi2OK;
 
+/* When the host unloads this library, unload pythonfmu's with it: pythonfmu's own
+ * library then lives exactly as long as it would in a host that loaded it directly. */
+__attribute__((destructor)) static void unload_inner(void) {
+    if (inner_lib && live_instances == 0) {
+        dlclose(inner_lib);
+        inner_lib = NULL;
+    }
+}
+
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char *fmi2GetVersion(void) { return fmi2Version; }
 
@@ -176,10 +184,7 @@ void fmi2FreeInstance(fmi2Component c) {
     if (!s->dead) {
         /* a dead instance is left to leak: pythonfmu has already released its object */
         INNER(fmi2FreeInstance)(s->inner);
-        if (--live_instances == 0 && inner_lib) {
-            dlclose(inner_lib);
-            inner_lib = NULL;
-        }
+        --live_instances;
     }
     free(s->name);
     free(s);
