@@ -17,9 +17,9 @@ sys.path.insert(0, str(HERE / "src"))
 
 from boomfmi.fmubuild import BuildError, build_fmu  # noqa: E402
 
-FMU_NAMES = ("valve", "cylinder", "boom_load", "force_estimator")
+FMU_NAMES = ("valve", "cylinder", "boom_load", "force_estimator", "hardware_bridge")
 #: SSP archives: build/<name>.ssp from ssp/<ssd>
-SSPS = {"excavator_boom": "SystemStructure.ssd"}
+SSPS = {"excavator_boom": "SystemStructure.ssd", "teleoperation": "teleoperation.ssd"}
 
 
 def main(argv=None) -> int:

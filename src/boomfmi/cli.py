@@ -2,6 +2,8 @@
 
     boomfmi simulate SSP --experiment paper_multistep|RUN.csv [--step 0.001] [--stop 9]
                          [--params params.ssv] [--algorithm gauss-seidel|jacobi] --out result.csv
+    boomfmi rig serve --port P [--lockstep] [--record FILE] [--config rig.json] [--key-file K]
+    boomfmi record --experiment paper_multistep --rig udp://127.0.0.1:P --out run.csv [--key-file K]
     boomfmi describe FMU [FMU ...]      the FMUs' interfaces as Markdown tables
     boomfmi check FMU_DIR               validate every FMU and replay its reference result
 """
@@ -10,6 +12,8 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+
+from .link.protocol import LinkError
 
 
 def _describe(args) -> int:
@@ -57,6 +61,31 @@ def _simulate(args) -> int:
     return 0
 
 
+def _rig_serve(args) -> int:
+    from .link.protocol import load_key
+    from .rig import VirtualRig, load_config
+    from .rig.server import serve
+    key = load_key(args.key_file)
+    plant = VirtualRig(load_config(args.config))
+    mode = "lockstep" if args.lockstep else "real time, 1 kHz"
+
+    def ready(port: int) -> None:
+        print(f"rig listening on udp://{args.host}:{port} ({mode}); watchdog {args.watchdog * 1e3:g} ms"
+              + (f"; recording to {args.record}" if args.record else ""), flush=True)
+
+    counters = serve(plant, key, args.port, args.host, args.lockstep, args.record, args.watchdog, ready)
+    print(f"rig stopped: {counters.summary()}", flush=True)
+    return 0
+
+
+def _record(args) -> int:
+    from .record import record_experiment
+    stats = record_experiment(args.fmu, args.rig, args.out, args.experiment, args.step, args.stop,
+                              args.key_file, args.timeout, args.retries, args.loss_budget)
+    print(f"wrote {args.out}: {stats['rows']} rows, {stats['lost_packets']} answers lost")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="boomfmi", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -71,6 +100,29 @@ def main(argv=None) -> int:
     p.add_argument("--algorithm", choices=("gauss-seidel", "jacobi"), default="gauss-seidel")
     p.add_argument("--out", type=Path, required=True, help="output CSV (recording columns plus x, v)")
     p.set_defaults(run=_simulate)
+    p = sub.add_parser("rig", help="the virtual rig")
+    rig_sub = p.add_subparsers(dest="rig_command", required=True)
+    p = rig_sub.add_parser("serve", help="simulate the machine behind an authenticated UDP link")
+    p.add_argument("--port", type=int, required=True, help="UDP port (0: any free port, printed)")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: loopback only)")
+    p.add_argument("--lockstep", action="store_true", help="advance one sample per command instead of real time")
+    p.add_argument("--record", type=Path, help="write every measured sample to this recording")
+    p.add_argument("--config", type=Path, help="JSON: effects, noise, contact, parameters (default: reference rig, noise on)")
+    p.add_argument("--key-file", help="file holding the shared link key (default: $BOOMFMI_LINK_KEY)")
+    p.add_argument("--watchdog", type=float, default=0.05, help="fail-safe after this long without a command [s]")
+    p.set_defaults(run=_rig_serve)
+    p = sub.add_parser("record", help="run an experiment on a rig through the hardware bridge, write a recording")
+    p.add_argument("--experiment", default="paper_multistep")
+    p.add_argument("--rig", required=True, help="udp://HOST:PORT")
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--key-file", help="file holding the shared link key (default: $BOOMFMI_LINK_KEY)")
+    p.add_argument("--fmu", type=Path, default=Path("build/fmus/hardware_bridge.fmu"))
+    p.add_argument("--step", type=float, default=1e-3)
+    p.add_argument("--stop", type=float, default=None)
+    p.add_argument("--timeout", type=float, default=0.05, help="longest wait for the rig's answer per step [s]")
+    p.add_argument("--retries", type=int, default=2)
+    p.add_argument("--loss-budget", type=int, default=20, help="consecutive lost answers before giving up")
+    p.set_defaults(run=_record)
     p = sub.add_parser("describe", help="print FMU interfaces as Markdown tables")
     p.add_argument("fmus", nargs="+", type=Path)
     p.set_defaults(run=_describe)
@@ -82,7 +134,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.run(args)
-    except (FileNotFoundError, ValueError, RuntimeError, KeyError) as e:
+    except (FileNotFoundError, ValueError, RuntimeError, KeyError, LinkError) as e:
         print(f"boomfmi {args.command}: {e}", file=sys.stderr)
         return 1
 

@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from .physics import reference_rig as rig
 
@@ -49,7 +48,7 @@ class RecordingError(ValueError):
 class Recording:
     """A validated recording: ``data`` in SI units (pressures still gauge, as stored)."""
     path: Path
-    data: pd.DataFrame
+    data: "pd.DataFrame"  # noqa: F821
     rig: dict = field(default_factory=dict)      #: reference-rig overrides from the sidecar
     notes: str = ""
 
@@ -60,6 +59,19 @@ class Recording:
 
 def read_recording(path) -> Recording:
     """Read and validate a recording and its sidecar; raise :class:`RecordingError`."""
+    import pandas as pd
+    header, values, extra, sidecar = parse_recording(path)
+    data = pd.DataFrame({c: values[c] for c in values})
+    for c, col in extra.items():
+        data[c] = col
+    data = data[header]
+    return Recording(Path(path), data, rig=dict(sidecar.get("rig", {})),
+                     notes=str(sidecar.get("notes", "")))
+
+
+def parse_recording(path):
+    """Validate a recording without pandas: ``(header, numeric columns as arrays, other
+    columns as lists of str, sidecar dict)``.  Raises :class:`RecordingError`."""
     path = Path(path)
     if not path.is_file():
         raise RecordingError(path, "no such file")
@@ -126,11 +138,7 @@ def read_recording(path) -> Recording:
             i = int(bad[0])
             raise RecordingError(path, f"gauge pressure {values[c][i]!r} Pa is below -P_atm = {-P_atm:g} Pa",
                                  row=i + 2, column=c)
-    data = pd.DataFrame({c: values[c] for c in numeric})
-    for c, col in extra.items():
-        data[c] = col
-    data = data[header]
-    return Recording(path, data, rig=dict(sidecar.get("rig", {})), notes=str(sidecar.get("notes", "")))
+    return header, values, extra, sidecar
 
 
 def _read_sidecar(path: Path) -> dict:
@@ -189,7 +197,7 @@ class RecordingWriter:
         self.close()
 
 
-def write_recording(path, data: pd.DataFrame, sidecar: dict | None = None) -> Path:
+def write_recording(path, data, sidecar: dict | None = None) -> Path:
     """Write a whole DataFrame as a recording (the required columns first)."""
     cols = [c for c in REQUIRED if c in data] + [c for c in data.columns if c not in REQUIRED]
     with RecordingWriter(path, cols, sidecar) as w:

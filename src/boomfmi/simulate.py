@@ -1,11 +1,14 @@
 """Run an experiment on an SSP system and return it in the recording format.
 
-``run_experiment`` drives the system's free input named ``u`` (the valve command) with
-a named command profile or with the ``u`` column of a recording, runs the
-co-simulation, and returns the columns of a recording (``t, u, p_a, p_b, alpha``, gauge
-pressures) plus ``x`` and ``v``, so that model output and rig recordings compare
-column by column.  The columns are found by name among the components' outputs
-(``p_a`` is the one output called ``p_a``), not wired here.
+``run_experiment`` drives every free input named ``u`` (the valve command; the model's
+valve and, in the teleoperation system, the hardware bridge) with a named command
+profile or with the ``u`` column of a recording, runs the co-simulation, and returns
+the columns of a recording (``t, u, p_a, p_b, alpha``, gauge pressures) plus ``x`` and
+``v``, so that model output and rig recordings compare column by column.  The columns
+are found by name among the model components' outputs (``p_a`` is the one output
+called ``p_a``), not wired here.  Where the system holds a hardware bridge, its
+measurements follow as ``p_a_measured``, ``p_b_measured``, ``alpha_measured``,
+``x_measured`` and ``u_applied``.
 """
 from __future__ import annotations
 
@@ -28,17 +31,18 @@ def _unique(names: list[str], short: str, what: str) -> str:
     return hits[0]
 
 
-def experiment_inputs(experiment: str, input_name: str):
-    """``(inputs, stop_time)`` for a named profile or a recording's ``u`` column."""
+def experiment_inputs(experiment: str, input_names: list[str]):
+    """``(inputs, stop_time)`` for a named profile or a recording's ``u`` column, driving
+    every input in ``input_names`` with the same command."""
     if experiment in PROFILES:
         prof = profile(experiment)
-        return (lambda t: {input_name: prof(t)["u"]}), prof.duration
+        return (lambda t: dict.fromkeys(input_names, prof(t)["u"])), prof.duration
     path = Path(experiment)
     if path.suffix.lower() != ".csv" and not path.exists():
         raise ValueError(f"unknown experiment {experiment!r}: give one of {', '.join(PROFILES)} "
                          f"or a recording (.csv)")
     rec = read_recording(path)
-    table = pd.DataFrame({"t": rec.data["t"], input_name: rec.data["u"]})
+    table = pd.DataFrame({"t": rec.data["t"], **{n: rec.data["u"] for n in input_names}})
     return table, float(rec.data["t"].iloc[-1])
 
 
@@ -47,15 +51,24 @@ def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
                    parameters=None, progress: bool = False) -> pd.DataFrame:
     """Simulate ``experiment`` on the SSP; return recording columns plus x and v."""
     with CoSimulation(ssp, step, algorithm, parameters) as cosim:
-        u_name = _unique(cosim.inputs, "u", "free input")
-        inputs, duration = experiment_inputs(experiment, u_name)
+        u_names = [n for n in cosim.inputs if n.rpartition(".")[2] == "u"]
+        if not u_names:
+            raise ValueError(f"the system has no free input named 'u' to drive; its inputs: {cosim.inputs}")
+        bridges = [n for n, i in cosim.instances.items() if i.model_description.modelName == "hardware_bridge"]
+        inputs, duration = experiment_inputs(experiment, u_names)
         result = cosim.simulate(stop_time if stop_time is not None else duration, inputs,
                                 progress=progress)
-        outputs = [c for c in result.columns if c.count(".") == 1 and c not in cosim.inputs]
+        outputs = [c for c in result.columns if c.count(".") == 1 and c not in cosim.inputs
+                   and c.partition(".")[0] not in bridges]
         P_atm = next((float(p.value) for n, p in cosim.structure.parameters.items()
                       if n.endswith(".P_atm")), rig.P_atm)
-    out = pd.DataFrame({"t": result["time"], "u": result[u_name]})
+    model_u = [n for n in u_names if n.partition(".")[0] not in bridges] or u_names
+    out = pd.DataFrame({"t": result["time"], "u": result[model_u[0]]})
     for name in RECORDED:
         col = result[_unique(outputs, name, "output")]
         out[name] = col - P_atm if name in ("p_a", "p_b") else col
+    for bridge in bridges[:1]:
+        for name in ("p_a", "p_b", "alpha", "x"):
+            out[f"{name}_measured"] = result[f"{bridge}.{name}"]
+        out["u_applied"] = result[f"{bridge}.u_applied"]
     return out

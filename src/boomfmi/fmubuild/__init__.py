@@ -55,9 +55,23 @@ def stage(fmu_dir: Path, staging: Path) -> Path:
     bundle.mkdir()
     (bundle / "__init__.py").write_text(
         f'"""The physics of the boomfmi {name} FMU: a private copy of boomfmi.physics."""\n')
-    shutil.copytree(PACKAGE_ROOT / "physics", bundle / "physics",
-                    ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
+    shutil.copytree(PACKAGE_ROOT / "physics", bundle / "physics", ignore=ignore)
     shutil.copy2(PACKAGE_ROOT / "fmislave.py", bundle / "fmislave.py")
+    # further boomfmi modules an FMU needs, one per line in fmus/<name>/bundle.txt
+    extra = fmu_dir / "bundle.txt"
+    if extra.is_file():
+        for line in extra.read_text().splitlines():
+            module = line.split("#")[0].strip()
+            if not module:
+                continue
+            source = PACKAGE_ROOT / module
+            if source.is_dir():
+                shutil.copytree(source, bundle / module, ignore=ignore)
+            elif source.is_file():
+                shutil.copy2(source, bundle / module)
+            else:
+                raise BuildError(f"{extra}: no module {module} in {PACKAGE_ROOT}")
     return staging / script.name
 
 

@@ -95,5 +95,8 @@ def write_reference_parameters(ssd: Path, fmu_dir: Path, out: Path) -> Path:
         for v in md.modelVariables:
             if v.causality == "parameter" and v.type == "Real":
                 params[f"{name}.{v.name}"] = (float(v.start), v.unit)
+            elif v.causality == "parameter":
+                params[f"{name}.{v.name}"] = ({"Integer": int, "Boolean": lambda s: s in ("true", "1"),
+                                                "String": str}[v.type](v.start), None)
     return write_ssv(out, "reference_rig", params,
                      "The reference rig of shared/spec/reference-rig.md: every model parameter")

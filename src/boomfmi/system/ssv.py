@@ -77,9 +77,10 @@ def read_ssv(data: bytes, where: str) -> dict[str, Parameter]:
     return parse_parameter_set(root, where)
 
 
-def write_ssv(path, name: str, parameters: dict[str, tuple[float, str | None]],
+def write_ssv(path, name: str, parameters: dict[str, tuple[object, str | None]],
               description: str | None = None) -> Path:
-    """Write a parameter set of Real values ``{hierarchical name: (value, unit)}``."""
+    """Write a parameter set ``{hierarchical name: (value, unit)}``: a float is a Real
+    (with its unit), a bool a Boolean, an int an Integer, a str a String."""
     from ..fmubuild.units import UNITS
     ET.register_namespace("ssv", NS["ssv"])
     ET.register_namespace("ssc", NS["ssc"])
@@ -90,11 +91,18 @@ def write_ssv(path, name: str, parameters: dict[str, tuple[float, str | None]],
     used = set()
     for pname, (value, unit) in parameters.items():
         p = ET.SubElement(params, f"{{{NS['ssv']}}}Parameter", name=pname)
-        attrs = {"value": repr(float(value))}
-        if unit and unit != "1":
-            attrs["unit"] = unit
-            used.add(unit)
-        ET.SubElement(p, f"{{{NS['ssv']}}}Real", attrs)
+        if isinstance(value, bool):
+            ET.SubElement(p, f"{{{NS['ssv']}}}Boolean", value="true" if value else "false")
+        elif isinstance(value, int):
+            ET.SubElement(p, f"{{{NS['ssv']}}}Integer", value=str(value))
+        elif isinstance(value, str):
+            ET.SubElement(p, f"{{{NS['ssv']}}}String", value=value)
+        else:
+            attrs = {"value": repr(float(value))}
+            if unit and unit != "1":
+                attrs["unit"] = unit
+                used.add(unit)
+            ET.SubElement(p, f"{{{NS['ssv']}}}Real", attrs)
     if used:
         units = ET.SubElement(root, f"{{{NS['ssv']}}}Units")
         for unit in sorted(used):

@@ -1,0 +1,200 @@
+"""hardware_bridge: the rig (or a virtual rig, or a recording) as an FMI 2.0 co-simulation FMU.
+
+Input the valve command u [V]; outputs what the rig measures, as recorded (gauge
+pressures p_a, p_b, the boom angle alpha), x from alpha by Eq. 12, the command the
+valve actually got (u_applied), the true external force where the rig knows it, and
+the link's state.
+
+Modes (parameter ``mode``):
+
+* ``replay``: plays the recording ``recording`` (recording format).  At each
+  communication point t the outputs are the recording's values at t: linear
+  interpolation between samples for p_a, p_b, alpha and f_ext (so a sample time gives
+  that sample exactly), and the last sample at or before t for u_applied (a command is
+  held until the next).  Outside the recording the nearest end is held and link_ok is
+  false.
+* ``udp``: talks to the rig at ``rig`` (udp://HOST:PORT) with authenticated datagrams
+  (``link/protocol.py``; key from ``key_file``, else $BOOMFMI_LINK_KEY).  Each step
+  sends the command, retrying up to ``retries`` times within ``timeout``.  A rig in
+  lockstep advances one sample per step; with a real-time rig the bridge paces itself
+  to the wall clock.  A lost answer holds the last sample and clears link_ok; more than
+  ``loss_budget`` consecutive losses is an fmi2Error.
+"""
+import bisect
+import time
+
+from boomfmi_hardware_bridge_lib.fmislave import BoomSlave, input, output, parameter
+from boomfmi_hardware_bridge_lib.link.client import RigClient, parse_address
+from boomfmi_hardware_bridge_lib.link.protocol import LinkError, load_key
+from boomfmi_hardware_bridge_lib.physics import Geometry, ParameterError, alpha_from_x, check_geometry, x_from_alpha
+from boomfmi_hardware_bridge_lib.physics import reference_rig as rig
+from boomfmi_hardware_bridge_lib.recording import RecordingError, parse_recording
+
+MEASURED = ("p_a", "p_b", "alpha", "f_ext")
+
+
+def _wait_until(deadline: float) -> None:
+    """Sleep to just short of ``deadline`` (perf_counter seconds), then spin: a plain
+    sleep overshoots by up to a few hundred microseconds."""
+    pause = deadline - time.perf_counter() - 3e-4
+    if pause > 0:
+        time.sleep(pause)
+    while time.perf_counter() < deadline:
+        pass
+
+
+class HardwareBridge(BoomSlave):
+    description = "The rig through its DAQ: commands out, measurements in (replay a recording or talk UDP to a rig)"
+    variables = (
+        input("u", rig.u_centre, "V", "valve command to send to the rig", min=0.0, max=10.0),
+        output("p_a", 0.0, "Pa", "measured chamber A pressure, gauge (as recorded)"),
+        output("p_b", 0.0, "Pa", "measured chamber B pressure, gauge (as recorded)"),
+        output("alpha", 0.0, "rad", "measured boom angle"),
+        output("x", 0.0, "m", "piston position from the measured alpha by Eq. 12"),
+        output("u_applied", rig.u_centre, "V", "command the valve actually got (5 V while the rig is in fail-safe)"),
+        output("f_ext", 0.0, "N", "true external force on the piston where the rig knows it (virtual rig, load cell), else 0"),
+        output("t_rig", 0.0, "s", "the rig's time of the current sample"),
+        output("link_ok", True, "1", "the current sample is fresh (false: held after a lost answer, or outside the recording)", type="Boolean"),
+        output("failsafe", False, "1", "the rig reports its fail-safe state (valve centred by its watchdog)", type="Boolean"),
+        output("lost_packets", 0, "1", "answers lost so far (after retries)", type="Integer"),
+        output("deadline_misses", 0, "1", "steps begun more than a step late against the wall clock (real-time rig only)", type="Integer"),
+        parameter("mode", "replay", "1", "replay: play the recording; udp: talk to the rig", type="String"),
+        parameter("recording", "", "1", "replay mode: path of the recording (CSV, recording format)", type="String"),
+        parameter("rig", "udp://127.0.0.1:47800", "1", "udp mode: the rig's address, udp://HOST:PORT", type="String"),
+        parameter("key_file", "", "1", "udp mode: file holding the shared link key; empty: $BOOMFMI_LINK_KEY", type="String"),
+        parameter("timeout", 0.05, "s", "udp mode: longest wait for an answer in one step (retries included)", min=0.0),
+        parameter("retries", 2, "1", "udp mode: resends of a command within the timeout", type="Integer", min=0),
+        parameter("loss_budget", 20, "1", "udp mode: consecutive lost answers tolerated before fmi2Error", type="Integer", min=0),
+        parameter("a", rig.a, "m", "boom geometry a (Eq. 12)", min=0.0),
+        parameter("b", rig.b, "m", "boom geometry b (Eq. 12)", min=0.0),
+        parameter("h", rig.h, "m", "boom geometry h (Eq. 10)", min=0.0),
+        parameter("l_min", rig.l_min, "m", "cylinder length at x = 0 (Eq. 11)", min=0.0),
+        parameter("L", rig.L, "m", "stroke", min=0.0),
+    )
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.modelName = "hardware_bridge"
+        self._client = None
+        self._geom = Geometry()
+        self._losses = 0
+
+    # -- set-up ----------------------------------------------------------------------------
+    def setup(self):
+        self._geom = Geometry(a=self.a, b=self.b, h=self.h, l_min=self.l_min)
+        check_geometry(self._geom, self.L)
+        if self.mode == "replay":
+            self._setup_replay()
+        elif self.mode == "udp":
+            self._setup_udp()
+        else:
+            raise ParameterError("mode", self.mode, "must be 'replay' or 'udp'")
+
+    def _setup_replay(self):
+        if not self.recording:
+            raise ParameterError("recording", self.recording, "replay mode needs a recording file")
+        try:
+            header, values, _, _ = parse_recording(self.recording)
+        except RecordingError as e:
+            raise ParameterError("recording", self.recording, str(e)) from None
+        self._t = [float(v) for v in values["t"]]
+        self._cols = {c: [float(v) for v in values[c]] for c in ("u", "p_a", "p_b", "alpha")}
+        self._cols["f_ext"] = [float(v) for v in values["f_ext"]] if "f_ext" in values else [0.0] * len(self._t)
+        self._show_replay(self._t[0])
+
+    def _setup_udp(self):
+        for name in ("retries", "loss_budget"):
+            if getattr(self, name) < 0:
+                raise ParameterError(name, getattr(self, name), "must be >= 0")
+        if not self.timeout > 0:
+            raise ParameterError("timeout", self.timeout, "must be > 0 s")
+        try:
+            host, port = parse_address(self.rig)
+        except LinkError as e:
+            raise ParameterError("rig", self.rig, str(e)) from None
+        try:
+            key = load_key(self.key_file or None)
+        except LinkError as e:
+            raise ParameterError("key_file", self.key_file, str(e)) from None
+        try:
+            self._client = RigClient(host, port, key, self.timeout)
+        except LinkError as e:
+            raise ParameterError("rig", self.rig, str(e)) from None
+        sample = self._exchange(None, 0.0)
+        if sample is None:
+            raise ParameterError("rig", self.rig, f"no authenticated answer from the rig within "
+                                                   f"{self.timeout:g} s (is it running, with the same key?)")
+        self._realtime = not sample.lockstep
+        self._wall0 = None
+        self._show(sample)
+
+    # -- replay ----------------------------------------------------------------------------
+    def _show_replay(self, t):
+        ts = self._t
+        i = bisect.bisect_right(ts, t + 1e-9) - 1
+        inside = ts[0] - 1e-9 <= t <= ts[-1] + 1e-9
+        if i < 0:
+            i, w = 0, 0.0
+        elif i >= len(ts) - 1 or abs(t - ts[i]) <= 1e-9:
+            i, w = min(i, len(ts) - 1), 0.0
+        else:
+            w = (t - ts[i]) / (ts[i + 1] - ts[i])
+        for c in MEASURED:
+            col = self._cols[c]
+            setattr(self, c, col[i] if w == 0.0 else col[i] + w * (col[i + 1] - col[i]))
+        self.u_applied = self._cols["u"][i]
+        self.x = x_from_alpha(self.alpha, self._geom)
+        self.t_rig = t
+        if not inside and self.link_ok:
+            self.log(f"replay: t = {t:g} s lies outside the recording ({ts[0]:g} to {ts[-1]:g} s); holding its end")
+        self.link_ok = inside
+
+    # -- udp -------------------------------------------------------------------------------
+    def _exchange(self, u, t):
+        attempts = self.retries + 1
+        client = self._client
+        client.timeout = self.timeout / attempts
+        for _ in range(attempts):
+            sample = client.exchange(u, t)
+            if sample is not None:
+                return sample
+        return None
+
+    def _show(self, s):
+        self.p_a, self.p_b, self.alpha, self.f_ext = s.p_a, s.p_b, s.alpha, s.f_ext
+        self.u_applied, self.t_rig, self.failsafe = s.u_applied, s.t, s.failsafe
+        self.x = x_from_alpha(self.alpha, self._geom)
+        self.link_ok = True
+
+    def step(self, t, dt):
+        if self.mode == "replay":
+            self._show_replay(t + dt)
+            return
+        if self._realtime:
+            now = time.perf_counter()
+            if self._wall0 is None:
+                self._wall0 = now - t
+            if now > self._wall0 + t + dt:
+                self.deadline_misses += 1
+            sample = self._exchange(self.u, t)                  # the command for [t, t + dt)
+            if sample is not None:
+                self._show(sample)
+            _wait_until(self._wall0 + t + dt)
+            sample = self._exchange(None, t + dt)               # the sample at t + dt
+        else:
+            sample = self._exchange(self.u, t)                  # lockstep: one command, one sample
+        if sample is None:
+            self.lost_packets += 1
+            self._losses += 1
+            self.link_ok = False
+            if self._losses > self.loss_budget:
+                raise ValueError(f"link to {self.rig} lost: {self._losses} answers in a row missing "
+                                 f"(loss budget {self.loss_budget}); the rig is gone or the key differs")
+            return
+        self._losses = 0
+        self._show(sample)
+
+    def terminate(self):
+        if self._client is not None:
+            self._client.close()
+            self._client = None

@@ -1,0 +1,91 @@
+"""The bridge's side of the link: one request, one authenticated answer, bounded wait.
+
+``RigClient.exchange`` sends a command (or a status request) and waits at most
+``timeout`` seconds for the sample that answers it.  Datagrams that are malformed,
+fail authentication, answer an older request or repeat an old rig sequence number are
+dropped and counted; a missing answer returns ``None``.  Nothing here ever blocks
+past its deadline.
+"""
+from __future__ import annotations
+
+import select
+import socket
+import time
+
+from .protocol import (BadMac, LinkError, Malformed, Sample, SequenceGuard, decode,
+                       encode_command, encode_status)
+
+
+def parse_address(url: str) -> tuple[str, int]:
+    """``udp://HOST:PORT`` (or ``HOST:PORT``) -> (host, port); raises LinkError."""
+    rest = url[len("udp://"):] if url.startswith("udp://") else url
+    host, sep, port = rest.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise LinkError(f"{url!r} is not a rig address of the form udp://HOST:PORT")
+    return host, int(port)
+
+
+class RigClient:
+    def __init__(self, host: str, port: int, key: bytes, timeout: float = 0.02):
+        if not timeout > 0:
+            raise LinkError(f"the reply timeout must be > 0 s, not {timeout!r}")
+        try:
+            self.address = (socket.gethostbyname(host), int(port))
+        except OSError as e:
+            raise LinkError(f"cannot resolve rig host {host!r}: {e}") from None
+        self.key = key
+        self.timeout = timeout
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setblocking(False)
+        self.seq = int(time.time() * 1000) & 0x3FFFFFFF     # fresh start above old sessions
+        self.guard = SequenceGuard()
+        self.dropped = {"malformed": 0, "auth": 0, "stale": 0, "replay": 0}
+
+    def _send(self, datagram: bytes) -> None:
+        try:
+            self.sock.sendto(datagram, self.address)
+        except OSError:
+            pass            # a refused or unreachable rig shows as a missing answer
+
+    def exchange(self, u: float | None, t: float) -> Sample | None:
+        """Send a command (``u``) or, with ``u=None``, a status request; return the rig's
+        answer, or None when none arrives within the timeout."""
+        self.seq += 1
+        seq = self.seq
+        self._send(encode_status(seq, t, self.key) if u is None else encode_command(seq, t, u, self.key))
+        deadline = time.perf_counter() + self.timeout
+        while True:
+            remaining = deadline - time.perf_counter()
+            if remaining <= 0:
+                return None
+            ready, _, _ = select.select([self.sock], [], [], remaining)
+            if not ready:
+                return None
+            try:
+                data, _ = self.sock.recvfrom(2048)
+            except (BlockingIOError, InterruptedError):
+                continue
+            except OSError:          # ICMP port unreachable: the rig is gone
+                time.sleep(min(remaining, 0.001))
+                continue
+            try:
+                msg = decode(data, self.key)
+            except Malformed:
+                self.dropped["malformed"] += 1
+                continue
+            except BadMac:
+                self.dropped["auth"] += 1
+                continue
+            if not isinstance(msg, Sample):
+                self.dropped["malformed"] += 1
+                continue
+            if msg.echo != seq:
+                self.dropped["stale"] += 1
+                continue
+            if not self.guard.accept(msg.seq):
+                self.dropped["replay"] += 1
+                continue
+            return msg
+
+    def close(self) -> None:
+        self.sock.close()

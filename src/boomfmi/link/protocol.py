@@ -1,0 +1,175 @@
+"""The rig link protocol, version 1.
+
+Every datagram is exactly ``DATAGRAM_SIZE`` = 112 bytes: an 80-byte payload and its
+HMAC-SHA256 (32 bytes) under a shared key.  Integers and floats are little-endian.
+
+Payload header (20 bytes), then the body, zero-padded to 80 bytes::
+
+    magic  2s  b"BF"
+    version u8  1
+    kind    u8  1 command, 2 sample, 3 status request
+    seq     u32 the sender's sequence number, strictly increasing per sender
+    flags   u32 samples: bit 0 fail-safe engaged, bit 1 rig in lockstep
+    t       f64 commands: the sender's time [s]; samples: the rig's sample time [s]
+
+    command body:  u f64 (valve command [V])
+    status body:   (none; asks for the current sample without stepping a lockstep rig)
+    sample body:   u_applied, p_a, p_b, alpha, f_ext, x (f64 each: V, Pa gauge, Pa gauge,
+                   rad, N, m), echo u32 (the seq of the command or status request this
+                   answers), rejected u32 (datagrams the rig has ignored so far)
+
+A receiver drops, and counts, a datagram of the wrong size, magic or version
+(malformed), one whose MAC does not verify (authentication), and one whose sequence
+number is not above the last accepted from that peer (replay).
+"""
+from __future__ import annotations
+
+import hashlib
+import hmac
+import math
+import os
+import struct
+from pathlib import Path
+from typing import NamedTuple
+
+MAGIC = b"BF"
+VERSION = 1
+PAYLOAD_SIZE = 80
+MAC_SIZE = 32
+DATAGRAM_SIZE = PAYLOAD_SIZE + MAC_SIZE
+COMMAND, SAMPLE, STATUS = 1, 2, 3
+FAILSAFE, LOCKSTEP = 1, 2
+KEY_ENV = "BOOMFMI_LINK_KEY"
+MIN_KEY_BYTES = 16
+
+_HEADER = struct.Struct("<2sBBIId")
+_COMMAND = struct.Struct("<2sBBIIdd")
+_SAMPLE = struct.Struct("<2sBBIId6dII")
+
+
+class LinkError(Exception):
+    """A link that cannot work (no key, bad address) or a datagram that is refused."""
+
+
+class Malformed(LinkError):
+    """Wrong size, magic, version or kind."""
+
+
+class BadMac(LinkError):
+    """The MAC does not verify under our key."""
+
+
+class Command(NamedTuple):
+    seq: int
+    t: float
+    u: float
+
+
+class StatusRequest(NamedTuple):
+    seq: int
+    t: float
+
+
+class Sample(NamedTuple):
+    seq: int
+    flags: int
+    t: float
+    u_applied: float
+    p_a: float
+    p_b: float
+    alpha: float
+    f_ext: float
+    x: float
+    echo: int
+    rejected: int
+
+    @property
+    def failsafe(self) -> bool:
+        return bool(self.flags & FAILSAFE)
+
+    @property
+    def lockstep(self) -> bool:
+        return bool(self.flags & LOCKSTEP)
+
+
+def load_key(key_file: str | os.PathLike | None = None, env: dict | None = None) -> bytes:
+    """The shared key: the contents of ``key_file``, else ``$BOOMFMI_LINK_KEY``.
+
+    Raises :class:`LinkError` when neither gives one of at least 16 bytes: the link
+    never runs unauthenticated.
+    """
+    env = os.environ if env is None else env
+    if key_file:
+        path = Path(key_file)
+        try:
+            key = path.read_bytes().strip()
+        except OSError as e:
+            raise LinkError(f"cannot read the link key file {path}: {e.strerror}") from None
+        source = f"key file {path}"
+    elif env.get(KEY_ENV):
+        key = env[KEY_ENV].encode("utf-8")
+        source = f"${KEY_ENV}"
+    else:
+        raise LinkError(f"no link key: give a key file or set {KEY_ENV}; "
+                        f"the link does not run unauthenticated")
+    if len(key) < MIN_KEY_BYTES:
+        raise LinkError(f"the link key from {source} has {len(key)} bytes; it needs at least {MIN_KEY_BYTES}")
+    return key
+
+
+def _seal(payload: bytes, key: bytes) -> bytes:
+    payload = payload.ljust(PAYLOAD_SIZE, b"\0")
+    return payload + hmac.new(key, payload, hashlib.sha256).digest()
+
+
+def encode_command(seq: int, t: float, u: float, key: bytes) -> bytes:
+    return _seal(_COMMAND.pack(MAGIC, VERSION, COMMAND, seq, 0, t, u), key)
+
+
+def encode_status(seq: int, t: float, key: bytes) -> bytes:
+    return _seal(_HEADER.pack(MAGIC, VERSION, STATUS, seq, 0, t), key)
+
+
+def encode_sample(seq: int, flags: int, t: float, u_applied: float, p_a: float, p_b: float,
+                  alpha: float, f_ext: float, x: float, echo: int, rejected: int, key: bytes) -> bytes:
+    return _seal(_SAMPLE.pack(MAGIC, VERSION, SAMPLE, seq, flags, t, u_applied, p_a, p_b,
+                              alpha, f_ext, x, echo & 0xFFFFFFFF, rejected & 0xFFFFFFFF), key)
+
+
+def decode(datagram: bytes, key: bytes):
+    """A :class:`Command`, :class:`StatusRequest` or :class:`Sample`; raises
+    :class:`Malformed` or :class:`BadMac`."""
+    if len(datagram) != DATAGRAM_SIZE:
+        raise Malformed(f"{len(datagram)} bytes, not {DATAGRAM_SIZE}")
+    payload, mac = datagram[:PAYLOAD_SIZE], datagram[PAYLOAD_SIZE:]
+    if not hmac.compare_digest(mac, hmac.new(key, payload, hashlib.sha256).digest()):
+        raise BadMac("the MAC does not verify")
+    magic, version, kind, seq, flags, t = _HEADER.unpack_from(payload)
+    if magic != MAGIC or version != VERSION:
+        raise Malformed(f"magic {magic!r} version {version}")
+    if kind == COMMAND:
+        u = _COMMAND.unpack_from(payload)[6]
+        if not math.isfinite(u):
+            raise Malformed("a command that is not a finite number")
+        return Command(seq, t, u)
+    if kind == STATUS:
+        return StatusRequest(seq, t)
+    if kind == SAMPLE:
+        f = _SAMPLE.unpack_from(payload)
+        return Sample(seq, flags, *f[5:])
+    raise Malformed(f"unknown kind {kind}")
+
+
+class SequenceGuard:
+    """Accepts strictly increasing sequence numbers; counts what it refuses."""
+
+    def __init__(self):
+        self.last = -1
+        self.replayed = 0
+
+    def accept(self, seq: int) -> bool:
+        if seq <= self.last:
+            self.replayed += 1
+            return False
+        self.last = seq
+        return True

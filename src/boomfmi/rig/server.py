@@ -1,0 +1,195 @@
+"""The virtual rig's process: the plant behind an authenticated UDP link.
+
+``RigServer`` binds to loopback (unless told otherwise) and answers the bridge:
+
+* a **command** (valve voltage) is applied from its arrival; in lockstep the rig then
+  advances exactly one sample (1 ms), unless the command repeats the time of the last
+  one (a retry after a lost answer, which must not step twice), and answers with the
+  new sample; in real time the rig advances on its own clock at 1 kHz and answers with
+  its latest sample at once;
+* a **status request** is answered with the current sample without stepping.
+
+Datagrams that are malformed, fail authentication or repeat an old sequence number
+(per sender) are ignored and counted.  **Watchdog**: when no valid command has arrived
+for ``watchdog`` seconds (50 ms by default, wall clock) the rig centres the valve (5 V)
+and reports the fail-safe state in every sample until commands resume.
+
+With ``record`` the rig writes every sample it measures in the recording format, plus
+``f_ext`` (the true external force), ``x`` (the true position) and ``failsafe``, row by
+row and crash-safe.
+"""
+from __future__ import annotations
+
+import select
+import signal
+import socket
+import time
+from dataclasses import dataclass, field
+
+from ..link.protocol import (FAILSAFE, LOCKSTEP, BadMac, Command, Malformed, SequenceGuard,
+                             StatusRequest, decode, encode_sample)
+from ..physics import reference_rig as rig
+from ..recording import RecordingWriter
+
+COLUMNS = ("t", "u", "p_a", "p_b", "alpha", "f_ext", "x", "failsafe")
+
+
+@dataclass
+class Counters:
+    commands: int = 0
+    status: int = 0
+    rejected_malformed: int = 0
+    rejected_auth: int = 0
+    rejected_replay: int = 0
+    failsafe_entries: int = 0
+    missed_ticks: int = 0
+    peers: dict = field(default_factory=dict)
+
+    @property
+    def rejected(self) -> int:
+        return self.rejected_malformed + self.rejected_auth + self.rejected_replay
+
+    def summary(self) -> str:
+        return (f"{self.commands} commands, {self.status} status requests; ignored "
+                f"{self.rejected_malformed} malformed, {self.rejected_auth} unauthenticated, "
+                f"{self.rejected_replay} replayed; fail-safe entered {self.failsafe_entries} times; "
+                f"{self.missed_ticks} ticks missed")
+
+
+class RigServer:
+    def __init__(self, plant, key: bytes, port: int = 0, host: str = "127.0.0.1",
+                 lockstep: bool = False, record=None, watchdog: float = 0.05, dt: float = 1e-3):
+        self.plant, self.key = plant, key
+        self.lockstep, self.watchdog, self.dt = lockstep, watchdog, dt
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind((host, port))
+        self.sock.setblocking(False)
+        self.port = self.sock.getsockname()[1]
+        self.counters = Counters()
+        self.u_cmd = rig.u_centre
+        self.last_command_wall = time.perf_counter()
+        self.last_command_t = None
+        self.failsafe = False
+        self.seq = 0
+        self.sample = plant.measure()
+        self.writer = RecordingWriter(record, COLUMNS) if record else None
+        self._record(self.sample)
+        self._stop = False
+
+    # -- the plant ---------------------------------------------------------------------------
+    def _record(self, s) -> None:
+        if self.writer:
+            self.writer.write((s.t, s.u_applied, s.p_a, s.p_b, s.alpha, s.f_ext, s.x, float(self.failsafe)))
+
+    def _watchdog(self, now: float) -> None:
+        if not self.failsafe and now - self.last_command_wall > self.watchdog:
+            self.failsafe = True
+            self.counters.failsafe_entries += 1
+
+    def _advance(self) -> None:
+        u = rig.u_centre if self.failsafe else self.u_cmd
+        self.sample = self.plant.step(u, self.dt)
+        self._record(self.sample)
+
+    # -- the link ----------------------------------------------------------------------------
+    def _reply(self, addr, echo: int) -> None:
+        s = self.sample
+        self.seq += 1
+        flags = (FAILSAFE if self.failsafe else 0) | (LOCKSTEP if self.lockstep else 0)
+        try:
+            self.sock.sendto(encode_sample(self.seq, flags, s.t, s.u_applied, s.p_a, s.p_b, s.alpha,
+                                           s.f_ext, s.x, echo, self.counters.rejected, self.key), addr)
+        except OSError:
+            pass
+
+    def _handle(self, data: bytes, addr) -> None:
+        c = self.counters
+        try:
+            msg = decode(data, self.key)
+        except Malformed:
+            c.rejected_malformed += 1
+            return
+        except BadMac:
+            c.rejected_auth += 1
+            return
+        if not isinstance(msg, (Command, StatusRequest)):
+            c.rejected_malformed += 1
+            return
+        guard = c.peers.setdefault(addr, SequenceGuard())
+        if not guard.accept(msg.seq):
+            c.rejected_replay += 1
+            return
+        if isinstance(msg, StatusRequest):
+            c.status += 1
+            self._reply(addr, msg.seq)
+            return
+        c.commands += 1
+        self.u_cmd = min(max(msg.u, rig.u_min), rig.u_max)
+        self.last_command_wall = time.perf_counter()
+        self.failsafe = False
+        if self.lockstep and (self.last_command_t is None or msg.t > self.last_command_t + 0.5 * self.dt):
+            self._advance()
+            self.last_command_t = msg.t
+        self._reply(addr, msg.seq)
+
+    def _drain(self) -> None:
+        while True:
+            try:
+                data, addr = self.sock.recvfrom(2048)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                continue
+            self._handle(data, addr)
+
+    # -- the loop ----------------------------------------------------------------------------
+    def stop(self, *_) -> None:
+        self._stop = True
+
+    def serve(self, duration: float | None = None) -> Counters:
+        """Serve until :meth:`stop` (SIGTERM, SIGINT) or for ``duration`` seconds of wall time."""
+        end = None if duration is None else time.perf_counter() + duration
+        next_tick = time.perf_counter() + self.dt
+        try:
+            while not self._stop:
+                now = time.perf_counter()
+                if end is not None and now >= end:
+                    break
+                if self.lockstep:
+                    wait = 0.05 if self.failsafe else max(0.0, self.last_command_wall + self.watchdog - now)
+                else:
+                    wait = max(0.0, next_tick - now)
+                if end is not None:
+                    wait = min(wait, max(0.0, end - now))
+                ready, _, _ = select.select([self.sock], [], [], min(wait, 0.05))
+                if ready:
+                    self._drain()
+                now = time.perf_counter()
+                self._watchdog(now)
+                if not self.lockstep:
+                    while now >= next_tick:
+                        self._advance()
+                        next_tick += self.dt
+                        if now - next_tick > 50 * self.dt:          # hopelessly behind: resync
+                            self.counters.missed_ticks += int((now - next_tick) / self.dt)
+                            next_tick = now + self.dt
+        finally:
+            self.close()
+        return self.counters
+
+    def close(self) -> None:
+        if self.writer:
+            self.writer.close()
+            self.writer = None
+        self.sock.close()
+
+
+def serve(plant, key: bytes, port: int, host: str = "127.0.0.1", lockstep: bool = False,
+          record=None, watchdog: float = 0.05, ready=None) -> Counters:
+    """Run a rig server until SIGTERM or SIGINT; ``ready(port)`` is called once bound."""
+    server = RigServer(plant, key, port, host, lockstep, record, watchdog)
+    signal.signal(signal.SIGTERM, server.stop)
+    signal.signal(signal.SIGINT, server.stop)
+    if ready:
+        ready(server.port)
+    return server.serve()
