@@ -125,19 +125,24 @@ def parse_recording(path):
     bad = np.flatnonzero(np.diff(t) <= 0)
     if bad.size:
         i = int(bad[0]) + 1
-        raise RecordingError(path, f"time does not increase ({t[i - 1]!r} s, then {t[i]!r} s)",
+        raise RecordingError(path, f"time does not increase ({float(t[i - 1])!r} s, then {float(t[i])!r} s)",
                              row=i + 2, column="t")
     u = values["u"]
     bad = np.flatnonzero((u < rig.u_min) | (u > rig.u_max))
     if bad.size:
         i = int(bad[0])
-        raise RecordingError(path, f"command {u[i]!r} V lies outside 0 to 10 V", row=i + 2, column="u")
+        raise RecordingError(path, f"command {float(u[i])!r} V lies outside 0 to 10 V", row=i + 2, column="u")
     for c in ("p_a", "p_b"):
         bad = np.flatnonzero(values[c] < -P_atm)
         if bad.size:
             i = int(bad[0])
-            raise RecordingError(path, f"gauge pressure {values[c][i]!r} Pa is below -P_atm = {-P_atm:g} Pa",
+            raise RecordingError(path, f"gauge pressure {float(values[c][i])!r} Pa is below -P_atm = {-P_atm:g} Pa",
                                  row=i + 2, column=c)
+    for c in list(extra):               # other columns: kept; numbers where every value is one
+        try:
+            extra[c] = np.array([float(v) for v in extra[c]])
+        except ValueError:
+            pass
     return header, values, extra, sidecar
 
 
