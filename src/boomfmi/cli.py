@@ -4,6 +4,7 @@
                          [--params params.ssv] [--algorithm gauss-seidel|jacobi] --out result.csv
     boomfmi rig serve --port P [--lockstep] [--record FILE] [--config rig.json] [--key-file K]
     boomfmi record --experiment paper_multistep --rig udp://127.0.0.1:P --out run.csv [--key-file K]
+    boomfmi identify RUN.csv [RUN.csv ...] [--method paper|fit] [--a-max] [--holdout H.csv] --out params.json
     boomfmi describe FMU [FMU ...]      the FMUs' interfaces as Markdown tables
     boomfmi check FMU_DIR               validate every FMU and replay its reference result
 """
@@ -86,6 +87,22 @@ def _record(args) -> int:
     return 0
 
 
+def _identify(args) -> int:
+    from .identify import identify_recordings, write_outputs
+    result, recs, _ = identify_recordings(args.recordings, args.method, args.a_max, args.cutoff, args.eq13)
+    doc = write_outputs(result, recs, args.out, args.holdout)
+    print(f"{result.method}: " + ", ".join(
+        f"{k} = {e.value:.4g} {e.unit}" + (f" [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]" if e.ci95[0] == e.ci95[0] else "")
+        for k, e in result.params.items()))
+    for w in result.warnings:
+        print(f"warning: {w}")
+    for path, err in doc.get("nrmse_holdout", {}).items():
+        print(f"holdout {path}: NRMSE x {100 * err['x']:.2f} %, p_a {100 * err['p_a']:.2f} %, p_b {100 * err['p_b']:.2f} %")
+    print(f"wrote {args.out}, {args.out.with_suffix('.ssv')}"
+          + (f", {args.out.with_suffix('.png')}" if args.out.with_suffix('.png').exists() else ""))
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="boomfmi", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -123,6 +140,18 @@ def main(argv=None) -> int:
     p.add_argument("--retries", type=int, default=2)
     p.add_argument("--loss-budget", type=int, default=20, help="consecutive lost answers before giving up")
     p.set_defaults(run=_record)
+    p = sub.add_parser("identify", help="identify the model's parameters from recordings")
+    p.add_argument("recordings", nargs="+", type=Path)
+    p.add_argument("--method", choices=("fit", "paper"), default="fit",
+                   help="fit: least squares on all samples, with intervals (default); paper: Eq. 13 to 17")
+    p.add_argument("--a-max", action="store_true", help="also identify the valve's A_max")
+    p.add_argument("--holdout", type=Path, action="append", default=[],
+                   help="a recording not used for fitting, to report the model's error on")
+    p.add_argument("--cutoff", type=float, default=25.0, help="low-pass cut-off [Hz]")
+    p.add_argument("--eq13", choices=("printed", "derived"), default="printed",
+                   help="paper method: Eq. 13 as printed, or as derived from the force balances")
+    p.add_argument("--out", type=Path, required=True, help="params.json (params.ssv and params.png go beside it)")
+    p.set_defaults(run=_identify)
     p = sub.add_parser("describe", help="print FMU interfaces as Markdown tables")
     p.add_argument("fmus", nargs="+", type=Path)
     p.set_defaults(run=_describe)

@@ -23,6 +23,7 @@ def multistep(levels=PAPER_LEVELS, period: float = 3.0, retract: float = 1.0,
         in_period = t - i * period
         return {"u": retract_command if in_period < retract else levels[i]}
     profile.duration = period * len(levels)
+    profile.breakpoints = sorted({i * period + r for i in range(len(levels)) for r in (0.0, retract)} - {0.0})
     return profile
 
 
@@ -31,7 +32,36 @@ def paper_multistep() -> Callable[[float], dict]:
     return multistep()
 
 
-PROFILES = {"paper_multistep": paper_multistep}
+def holdout_multistep() -> Callable[[float], dict]:
+    """A second multistep for holdout checks: retract at 8 V, then 1.8, 3.2 and 0.5 V."""
+    return multistep(levels=(1.8, 3.2, 0.5), period=3.0, retract=1.0, retract_command=8.0)
+
+
+def random_steps(seed: int = 0, duration: float = 12.0, hold=(0.15, 0.8)) -> Callable[[float], dict]:
+    """Steps to random commands held for random times: extending (0.5 to 4.5 V),
+    retracting (5.5 to 9.5 V) and centred, with reversals mid-stroke.  A richer
+    excitation than the paper's multistep (breakaways, accelerations and decelerations
+    in both directions) for identification and diagnosis."""
+    import numpy as np
+    rng = np.random.default_rng(seed)
+    times, levels, t = [], [], 0.0
+    while t < duration:
+        times.append(t)
+        kind = rng.choice(3, p=[0.45, 0.4, 0.15])
+        levels.append(float(rng.uniform(0.5, 4.5) if kind == 0 else
+                            rng.uniform(5.5, 9.5) if kind == 1 else 5.0))
+        t += float(rng.uniform(*hold))
+
+    def profile(t: float) -> dict:
+        i = max(0, int(np.searchsorted(times, t, side="right")) - 1)
+        return {"u": levels[i]}
+    profile.duration = duration
+    profile.breakpoints = times[1:]
+    return profile
+
+
+PROFILES = {"paper_multistep": paper_multistep, "holdout_multistep": holdout_multistep,
+            "random_steps": random_steps}
 
 
 def profile(name: str) -> Callable[[float], dict]:

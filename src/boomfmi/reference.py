@@ -110,20 +110,22 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
                 F = ph.drive_force(y[0], y[1], phi, f_ext, model.cylinder, model.load, model.P_atm)
                 return [dp_a, dp_b, y[3], (F - K_v * y[3] - s * F_d * math.cos(phi)) / M]
 
+            # each event sits a hair past its threshold (1e-12 m/s, 1e-12 m, 1e-9 N), so a
+            # segment that starts on a threshold does not trigger it again at once
             events = []
             if s != 0:
-                stop_v = lambda _, y: y[3]
+                stop_v = lambda _, y, s=s: y[3] + s * 1e-12
                 stop_v.terminal, stop_v.direction = True, -s
-                stop_x = (lambda _, y: y[2] - L) if s > 0 else (lambda _, y: y[2])
+                stop_x = (lambda _, y: y[2] - L - 1e-12) if s > 0 else (lambda _, y: y[2] + 1e-12)
                 stop_x.terminal, stop_x.direction = True, s
                 events = [stop_v, stop_x]
             else:
                 def away_up(_, y):
                     F, limit = forces(cmd, y)
-                    return F - limit
+                    return F - limit - 1e-9
                 def away_down(_, y):
                     F, limit = forces(cmd, y)
-                    return -F - limit
+                    return -F - limit - 1e-9
                 for ev in (away_up, away_down):
                     ev.terminal, ev.direction = True, 1
                 if y[2] < L:

@@ -14,7 +14,7 @@ valve's ``chamber_flows`` and their slopes ``chamber_flow_slopes``, each chamber
 ``chamber_pressure_step`` (exact for a closed chamber, exponential against the valve's
 linearisation otherwise), ``advance_load`` with the paper's stick/slip rule and hard
 end stops, and the geometry of Eq. 10 to 12.  Valve and chambers are coupled
-Gauss-Seidel over internal substeps of at most ``SUBSTEP`` = 0.25 ms (shorter with a
+Gauss-Seidel over internal substeps of at most ``SUBSTEP`` = 0.1 ms (shorter with a
 stiff contact or a fast vibration): the load moves under the pressures at the start of
 the substep, then the chambers follow the volume change.  With every effect and the
 noise off it reproduces ``boomfmi.reference.simulate_reference`` to about 0.01 %
@@ -120,8 +120,11 @@ from ..physics.rig_truth import (chamber_temperature, chamber_wall_areas, cushio
                                  thermal_equivalent_flow, vibration_force, wall_heat_flow)
 from ..physics.valve import chamber_flow_slopes, chamber_flows, orifice_area
 
-#: Longest internal substep [s].
-SUBSTEP = 2.5e-4
+#: Longest internal substep [s].  0.1 ms: the load moves under the pressures at the
+#: start of a substep and a start of motion is tested at substep boundaries, so a
+#: coarser substep delays every start by a fraction of it (0.25 ms biased starts from a
+#: stop, where the drive force sweeps through the static band in about a millisecond).
+SUBSTEP = 1.0e-4
 #: Command range of the valve [V].
 U_MIN, U_MAX = rig.u_min, rig.u_max
 #: ADC resolution [bit] and the measured ranges: pressure gauge [Pa], angle [rad].

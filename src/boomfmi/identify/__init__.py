@@ -1,0 +1,156 @@
+"""Identification of the model's parameters from recordings.
+
+``fit`` is the sound method (all samples, least squares, intervals); ``paper`` the
+paper's method as written.  :func:`identify_recordings` reads, prepares and fits;
+:func:`write_outputs` writes ``params.json``, the SSP parameter set ``params.ssv`` that
+``boomfmi simulate --params`` takes, and a plot like the paper's Fig. 6.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .. import physics as ph
+from ..physics import reference_rig as rig
+from ..recording import read_recording
+from .fit import FitResult, identify
+from .paper import identify_paper
+from .preprocess import CUTOFF, prepare
+
+#: Where each identified parameter lives in the SSP system.
+SSP_NAMES = {"K_v": "boom_load.K_v", "F_s": "boom_load.F_s", "F_d": "boom_load.F_d",
+             "F_L": "boom_load.F_L", "M": "boom_load.M", "A_max": "valve.A_max"}
+
+
+def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
+                        cutoff: float = CUTOFF, eq13: str = "printed"):
+    """Read, validate and prepare the recordings, then identify; returns
+    ``(FitResult, recordings, prepared)``."""
+    recs = [read_recording(p) for p in paths]
+    rigs = {json.dumps(r.rig, sort_keys=True) for r in recs}
+    if len(rigs) > 1:
+        raise ValueError("the recordings come from different rigs (their sidecars' 'rig' values differ): "
+                         + ", ".join(str(r.path) for r in recs))
+    overrides = recs[0].rig
+    P_atm = float(overrides.get("P_atm", rig.P_atm))
+    preps = [prepare(r, cutoff, P_atm=P_atm) for r in recs]
+    if method == "fit":
+        result = identify(preps, P_atm=P_atm, with_A_max=with_A_max)
+    elif method == "paper":
+        result = identify_paper(preps, P_atm=P_atm, eq13=eq13)
+    else:
+        raise ValueError(f"unknown method {method!r}: 'paper' or 'fit'")
+    result.details["recordings"] = [str(p) for p in paths]
+    result.details["cutoff_Hz"] = cutoff
+    return result, recs, preps
+
+
+def model_for(values: dict):
+    """A ``reference.Model`` with the identified values in place of the reference rig's."""
+    from ..reference import Model
+    load = ph.Load(**{k: values[k] for k in ("K_v", "F_s", "F_d", "F_L", "M") if k in values
+                      and math.isfinite(values[k])})
+    valve = ph.Valve(A_max=values["A_max"]) if "A_max" in values else ph.Valve()
+    return Model(load=load, valve=valve)
+
+
+def simulate_recording(values: dict, rec):
+    """The model with ``values`` driven by a recording's command (its u held between
+    samples), on the recording's times; pressures gauge like the recording."""
+    from ..reference import simulate_reference
+    t = rec.data["t"].to_numpy(dtype=float)
+    u = rec.data["u"].to_numpy(dtype=float)
+    changes = t[1:][np.diff(u) != 0]
+
+    def command(s):
+        i = max(0, int(np.searchsorted(t, s + 1e-9, side="right")) - 1)
+        return {"u": float(u[i])}
+    model = model_for(values)
+    x0 = float(np.clip(ph.x_from_alpha(float(rec.data["alpha"].iloc[0])), 0.0, model.cylinder.L))
+    model.x0 = x0
+    model.p_a0 = float(rec.data["p_a"].iloc[0]) + rec.P_atm
+    model.p_b0 = float(rec.data["p_b"].iloc[0]) + rec.P_atm
+    sim = simulate_reference(model, command, float(t[-1]), times=t - t[0], breakpoints=changes - t[0])
+    sim["p_a"] -= rec.P_atm
+    sim["p_b"] -= rec.P_atm
+    return sim
+
+
+def nrmse(sim, rec) -> dict:
+    """NRMSE of x, p_a, p_b: RMS error over the recording's range."""
+    out = {}
+    x_rec = ph.x_from_alpha(rec.data["alpha"].to_numpy(dtype=float))
+    for name, measured in (("x", x_rec), ("p_a", rec.data["p_a"].to_numpy(float)),
+                           ("p_b", rec.data["p_b"].to_numpy(float))):
+        span = float(np.ptp(measured)) or 1.0
+        out[name] = float(np.sqrt(np.mean((sim[name].to_numpy() - measured) ** 2)) / span)
+    return out
+
+
+def plot_fit(values: dict, rec, path) -> None:
+    """Recorded and simulated x, p_a, p_b over the experiment (the paper's Fig. 6)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    sim = simulate_recording(values, rec)
+    t = rec.data["t"].to_numpy()
+    x_rec = ph.x_from_alpha(rec.data["alpha"].to_numpy(dtype=float))
+    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
+    axes[0].plot(t, 1e3 * x_rec, lw=0.8, label="recorded")
+    axes[0].plot(t, 1e3 * sim["x"], lw=1.0, label="model, identified parameters")
+    axes[0].set_ylabel("x [mm]")
+    for ax, ch in ((axes[1], "p_a"), (axes[2], "p_b")):
+        ax.plot(t, rec.data[ch] / 1e5, lw=0.8)
+        ax.plot(t, sim[ch] / 1e5, lw=1.0)
+        ax.set_ylabel(f"{ch} [bar gauge]")
+    axes[2].set_xlabel("t [s]")
+    axes[0].legend(loc="upper left")
+    axes[0].set_title(f"{Path(rec.path).name}: recorded and simulated response")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_outputs(result: FitResult, recs, out, holdout=()) -> dict:
+    """Write ``out`` (params.json), ``params.ssv`` and ``params.png`` beside it."""
+    from ..system.ssv import write_ssv
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    values = result.values()
+    doc = {"method": result.method,
+           "params": {k: {"value": e.value, "ci95": list(e.ci95), "unit": e.unit}
+                      for k, e in result.params.items()},
+           "warnings": result.warnings,
+           "details": _plain(result.details)}
+    finite = {k: v for k, v in values.items() if math.isfinite(v)}
+    doc["nrmse_fit"] = {str(r.path): nrmse(simulate_recording(finite, r), r) for r in recs} if _usable(finite) else {}
+    for h in holdout:
+        hr = read_recording(h)
+        doc.setdefault("nrmse_holdout", {})[str(hr.path)] = nrmse(simulate_recording(finite, hr), hr)
+    out.write_text(json.dumps(doc, indent=2))
+    ssv = out.with_suffix(".ssv")
+    write_ssv(ssv, "identified", {SSP_NAMES[k]: (v, result.params[k].unit) for k, v in finite.items()},
+              f"identified by boomfmi ({result.method}) from " + ", ".join(str(r.path) for r in recs))
+    if _usable(finite):
+        plot_fit(finite, recs[0], out.with_suffix(".png"))
+    return doc
+
+
+def _usable(values: dict) -> bool:
+    return all(k in values and values[k] > 0 for k in ("K_v", "F_d", "M")) and "F_L" in values
+
+
+def _plain(obj):
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, (np.floating, np.integer)):
+        return obj.item()
+    return obj
+
+
+__all__ = ["identify_recordings", "write_outputs", "simulate_recording", "nrmse", "FitResult"]
