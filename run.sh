@@ -24,3 +24,8 @@ $B record --experiment paper_multistep --rig "udp://127.0.0.1:$port" --key-file 
 kill -TERM $rig_pid; wait $rig_pid || true
 trap - EXIT
 cat out/rig.log
+
+# identify the model from the rig's recording, then run the identified model
+$B identify out/paper_multistep_rig.csv --out out/params.json
+$B simulate build/excavator_boom.ssp --experiment out/paper_multistep_rig.csv --params out/params.ssv \
+    --out out/paper_multistep_identified.csv

@@ -47,11 +47,12 @@ def onset(p: Prepared, i: int, tolerance: float = 5e-5) -> int:
 def _starts(preps: list[Prepared], cyl: ph.Cylinder, P_atm: float, L: float):
     pos, neg = [], []
     for p in preps:
-        for i in (onset(p, k) for k in breakaways(p, L)):
+        for k in breakaways(p, L):
+            i = onset(p, k)
             gauge_a, gauge_b = p.p_a[i] - P_atm, p.p_b[i] - P_atm
             F = gauge_a * cyl.A_a - gauge_b * cyl.A_b                      # Eq. 14
-            phi = float(p.phi[i])
-            (pos if p.x_raw[i] > np.median(p.x_raw[max(0, i - 80):max(1, i - 40)]) else neg).append((F, phi, p.t[i]))
+            extending = p.x[k] > p.x[i]
+            (pos if extending else neg).append((F, float(p.phi[i]), float(p.t[i])))
     return pos, neg
 
 

@@ -15,8 +15,8 @@ valve's ``chamber_flows`` and their slopes ``chamber_flow_slopes``, each chamber
 linearisation otherwise), ``advance_load`` with the paper's stick/slip rule and hard
 end stops, and the geometry of Eq. 10 to 12.  Valve and chambers are coupled
 Gauss-Seidel over internal substeps of at most ``SUBSTEP`` = 0.1 ms (shorter with a
-stiff contact or a fast vibration): the load moves under the pressures at the start of
-the substep, then the chambers follow the volume change.  With every effect and the
+stiff contact or a fast vibration): the load moves under the pressures predicted for
+the middle of the substep (Eq. 7), then the chambers follow the volume change.  With every effect and the
 noise off it reproduces ``boomfmi.reference.simulate_reference`` to about 0.01 %
 NRMSE on the paper's experiment.
 
@@ -108,7 +108,7 @@ import numpy as np
 
 from .. import physics as ph
 from ..physics import reference_rig as rig
-from ..physics.chamber import chamber_pressure_step, chamber_volumes
+from ..physics.chamber import chamber_pressure_step, chamber_volumes, pressure_rates
 from ..physics.geometry import alpha_from_x
 from ..physics.load import advance_load
 from ..physics.orifice import signed_mass_flow, signed_mass_flow_slope
@@ -580,9 +580,14 @@ class VirtualRig:
                 s_a += l_a
                 s_b += l_b
 
-            # the boom moves under the pressures at the start of the substep
+            # the boom moves under the pressures predicted for the middle of the substep
+            # (a second-order coupling: pressures from the substep's start would delay
+            # every start of motion by half a substep)
+            dpa, dpb = pressure_rates(p_a, p_b, m_in_a, m_in_b, x, v, cyl, gas)
+            p_am = max(p_a + half * dpa, 0.5 * p_a)
+            p_bm = max(p_b + half * dpb, 0.5 * p_b)
             ld = stribeck_load(load, abs(v), stribeck["F_brk"], stribeck["v_s"]) if stribeck else load
-            x1, v = advance_load(x, v, h, p_a, p_b, f, cyl, geom, ld, P_atm, h)
+            x1, v = advance_load(x, v, h, p_am, p_bm, f, cyl, geom, ld, P_atm, h)
             V_a1, V_b1 = chamber_volumes(x1, cyl)
 
             # the chambers follow
