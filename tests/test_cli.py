@@ -42,6 +42,7 @@ def test_simulate_replays_a_recordings_command_with_parameters(ssp_path, tmp_pat
     (["simulate", "nowhere.ssp", "--out", "x.csv"], "nowhere.ssp: no such SSP file"),
     (["simulate", "{ssp}", "--experiment", "wobble", "--out", "x.csv"], "unknown experiment 'wobble'"),
     (["simulate", "{ssp}", "--experiment", "{bad}", "--out", "x.csv"], "bad.csv, line 1, column 'u': missing required column"),
+    (["simulate", "{ssp}", "--stop", "0.01", "--out", "."], "Is a directory"),
 ])
 def test_bad_input_is_a_one_line_error(ssp_path, tmp_path, args, message):
     bad = tmp_path / "bad.csv"
@@ -51,3 +52,13 @@ def test_bad_input_is_a_one_line_error(ssp_path, tmp_path, args, message):
                           capture_output=True, text=True)
     assert proc.returncode == 1
     assert message in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_a_recordings_sidecar_reaches_the_model(ssp_path, tmp_path):
+    """A supply pressure of 5 bar in the sidecar: the simulated chamber fills to 5 bar."""
+    t = np.round(np.arange(0, 1.5005, 1e-3), 6)
+    run = pd.DataFrame({"t": t, "u": np.where(t < 0.5, 10.0, 1.0), "p_a": 0.0, "p_b": 0.0, "alpha": 0.634})
+    write_recording(tmp_path / "run.csv", run, sidecar={"rig": {"supply_pressure_gauge": 5.0e5}})
+    out = tmp_path / "model.csv"
+    assert main(["simulate", str(ssp_path), "--experiment", str(tmp_path / "run.csv"), "--out", str(out)]) == 0
+    assert read_recording(out).data["p_a"].iloc[-1] == pytest.approx(5.0e5, rel=5e-3)   # not 6 bar

@@ -96,3 +96,25 @@ def test_udp_with_no_rig_fails_within_its_timeout(fmu, monkeypatch):
         with pytest.raises(FmuError, match="no authenticated answer from the rig"):
             b.initialize(dict(mode="udp", rig="udp://127.0.0.1:9", timeout=0.05))
         assert time.perf_counter() - t < 1.0
+
+
+def test_x_alpha_x_round_trips_through_the_fmus(fmu, tmp_path):
+    """boom_load's alpha, replayed through the bridge, gives back boom_load's x (Eq. 12
+    one way in one FMU, the other way in the other) to 1e-12."""
+    xs = np.linspace(0.0, 0.06, 41)
+    alphas = []
+    for x0 in xs:
+        with FmuInstance(fmu("boom_load")) as boom:
+            boom.initialize(dict(x0=float(x0)))
+            alphas.append(boom.get("alpha")["alpha"])
+    t = np.round(np.arange(len(xs)) * 1e-3, 6)
+    path = write_recording(tmp_path / "alphas.csv", pd.DataFrame(
+        {"t": t, "u": 5.0, "p_a": 0.0, "p_b": 0.0, "alpha": alphas}))
+    got = []
+    with FmuInstance(fmu("hardware_bridge")) as b:
+        b.initialize(dict(mode="replay", recording=str(path)))
+        got.append(b.get("x")["x"])
+        for k in range(len(xs) - 1):
+            b.step_to(k * 1e-3, 1e-3)
+            got.append(b.get("x")["x"])
+    np.testing.assert_allclose(got, xs, rtol=0, atol=1e-12)

@@ -52,6 +52,14 @@ def test_sound_fit_recovers_the_parameters_within_5_percent(recordings):
     assert nrmse(simulate_recording(result.values(), hold), hold)["x"] < 0.02
 
 
+def test_A_max_from_the_chambers_mass_balance(recordings):
+    d, _ = recordings
+    result, _, _ = identify_recordings([d / "fit.csv"], "fit", with_A_max=True)
+    est = result.params["A_max"]
+    assert est.value == pytest.approx(rig.A_max, rel=0.1)
+    assert est.ci95[0] < est.value < est.ci95[1]
+
+
 def test_paper_method_reports_its_condition_number(recordings):
     d, _ = recordings
     result, _, _ = identify_recordings([d / "fit.csv"], "paper")

@@ -36,6 +36,10 @@ def test_sidecar_overrides_the_rig(tmp_path):
     path.with_suffix(".json").write_text(json.dumps({"rig": {"supply_pressure_gauge": 650000}, "notes": "cold day"}))
     rec = read_recording(path)
     assert rec.rig == {"supply_pressure_gauge": 650000} and rec.notes == "cold day"
+    assert rec.rig_values() == {"P_s": 101325.0 + 650000}
+    path.with_suffix(".json").write_text(json.dumps({"rig": {"suply_pressure": 6e5}}))
+    with pytest.raises(RecordingError, match="run.json: unknown rig value 'suply_pressure'"):
+        read_recording(path)
 
 
 BAD = [

@@ -97,7 +97,7 @@ def test_record_through_the_bridge_on_a_lockstep_rig(fmu, rig, tmp_path):
     assert len(rec.data) == 2001 and stats["lost_packets"] == 0
     assert rec.data["link_ok"].all()
     np.testing.assert_allclose(rec.data["t_rig"], rec.data["t"], atol=1e-9)   # lockstep: one sample a step
-    assert rec.data["x"].max() > 0.05                                          # the boom moved
+    assert rec.data["x_alpha"].max() > 0.05                                    # the boom moved
     rig_rec = read_recording(r.record)                                         # the rig's own recording
     assert "f_ext" in rig_rec.data and len(rig_rec.data) == 2001
     assert r.count("commands") == 2000
@@ -135,6 +135,8 @@ def test_a_damaged_link_keeps_the_recording_valid_and_aligned(fmu, rig, tmp_path
     assert ok.mean() > 0.97
     # retries within the timeout keep the lockstep rig on the bridge's clock
     np.testing.assert_allclose(rec.data["t_rig"][ok], rec.data["t"][ok], atol=1e-9)
+    rig_rec = read_recording(r.record).data
+    assert (rig_rec["failsafe"].iloc[:-1] == 0).all(), "no fail-safe while commands keep coming"
     if "duplicate" in faults:
         assert r.count("replayed") > 0
     if "corrupt" in faults:
@@ -195,6 +197,19 @@ def test_a_wrong_key_gets_no_answer_and_is_counted(fmu, rig, monkeypatch):
             b.initialize(dict(mode="udp", rig=r.url, timeout=0.05))
     r.stop()
     assert r.count("unauthenticated") >= 1 and r.count("commands") == 0
+
+
+def test_a_lockstep_rig_serves_a_second_run_and_any_step(fmu, rig, tmp_path):
+    """A second session starts its clock at 0 again; a 2 ms step advances 2 ms."""
+    r = rig()
+    first = record_experiment(fmu("hardware_bridge"), r.url, tmp_path / "one.csv", stop_time=0.5)
+    second = record_experiment(fmu("hardware_bridge"), r.url, tmp_path / "two.csv", stop_time=2.0, step=2e-3)
+    r.stop()
+    assert first["lost_packets"] == second["lost_packets"] == 0
+    two = read_recording(tmp_path / "two.csv").data
+    assert len(two) == 1001
+    np.testing.assert_allclose(np.diff(two["t_rig"]), 2e-3, atol=1e-9)   # the rig stepped with the bridge
+    assert two["x_alpha"].max() > 0.05                                      # and moved the boom
 
 
 def test_a_replayed_datagram_is_ignored(rig):

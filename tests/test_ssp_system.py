@@ -217,3 +217,15 @@ def test_algebraic_loop_is_refused(ssp_path, tmp_path):
 def test_unknown_input_name_is_refused(ssp_path):
     with pytest.raises(ValueError, match="no free input"):
         simulate_ssp(ssp_path, stop_time=0.01, inputs={"u": 1.0})
+
+
+def test_a_binding_on_a_free_input_holds_it(ssp_path):
+    out = simulate_ssp(ssp_path, stop_time=0.01, parameters={"boom_load.f_ext": 300.0})
+    assert (out["boom_load.f_ext"] == 300.0).all()
+
+
+def test_a_cosimulation_runs_once(ssp_path):
+    with CoSimulation(ssp_path, 1e-3) as cosim:
+        cosim.simulate(0.002)
+        with pytest.raises(RuntimeError, match="runs once"):
+            cosim.simulate(0.002)

@@ -51,7 +51,7 @@ class HardwareBridge(BoomSlave):
         output("p_b", 0.0, "Pa", "measured chamber B pressure, gauge (as recorded)"),
         output("alpha", 0.0, "rad", "measured boom angle"),
         output("x", 0.0, "m", "piston position from the measured alpha by Eq. 12"),
-        output("u_applied", rig.u_centre, "V", "command the valve actually got (5 V while the rig is in fail-safe)"),
+        output("u_applied", rig.u_centre, "V", "command the valve got over the last step (5 V while the rig is in fail-safe)"),
         output("f_ext", 0.0, "N", "true external force on the piston where the rig knows it (virtual rig, load cell), else 0"),
         output("t_rig", 0.0, "s", "the rig's time of the current sample"),
         output("link_ok", True, "1", "the current sample is fresh (false: held after a lost answer, or outside the recording)", type="Boolean"),
@@ -120,11 +120,12 @@ class HardwareBridge(BoomSlave):
             self._client = RigClient(host, port, key, self.timeout)
         except LinkError as e:
             raise ParameterError("rig", self.rig, str(e)) from None
-        sample = self._exchange(None, 0.0)
+        sample = self._exchange(None, self.start_time, 0.0)
         if sample is None:
             raise ParameterError("rig", self.rig, f"no authenticated answer from the rig within "
                                                    f"{self.timeout:g} s (is it running, with the same key?)")
         self._realtime = not sample.lockstep
+        self._rig_t0 = sample.t - self.start_time      # the rig's clock against ours (lockstep)
         self._wall0 = None
         self._show(sample)
 
@@ -150,12 +151,12 @@ class HardwareBridge(BoomSlave):
         self.link_ok = inside
 
     # -- udp -------------------------------------------------------------------------------
-    def _exchange(self, u, t):
+    def _exchange(self, u, t, dt):
         attempts = self.retries + 1
         client = self._client
         client.timeout = self.timeout / attempts
         for _ in range(attempts):
-            sample = client.exchange(u, t)
+            sample = client.exchange(u, t, dt) if u is not None else client.exchange(None, t)
             if sample is not None:
                 return sample
         return None
@@ -176,13 +177,17 @@ class HardwareBridge(BoomSlave):
                 self._wall0 = now - t
             if now > self._wall0 + t + dt:
                 self.deadline_misses += 1
-            sample = self._exchange(self.u, t)                  # the command for [t, t + dt)
+            sample = self._exchange(self.u, t, dt)              # the command for [t, t + dt)
             if sample is not None:
                 self._show(sample)
             _wait_until(self._wall0 + t + dt)
-            sample = self._exchange(None, t + dt)               # the sample at t + dt
+            sample = self._exchange(None, t + dt, dt)           # the sample at t + dt
         else:
-            sample = self._exchange(self.u, t)                  # lockstep: one command, one sample
+            sample = self._exchange(self.u, t, dt)              # lockstep: one command, one sample
+            if sample is not None and abs(sample.t - (self._rig_t0 + t + dt)) > 0.5 * dt:
+                raise ValueError(
+                    f"the lockstep rig is at t = {sample.t:.6g} s where this bridge expects "
+                    f"{self._rig_t0 + t + dt:.6g} s: another client is driving it")
         if sample is None:
             self.lost_packets += 1
             self._losses += 1

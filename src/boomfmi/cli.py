@@ -163,7 +163,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.run(args)
-    except (FileNotFoundError, ValueError, RuntimeError, KeyError, LinkError) as e:
+    except (OSError, ValueError, RuntimeError, KeyError, LinkError) as e:
         print(f"boomfmi {args.command}: {e}", file=sys.stderr)
         return 1
 

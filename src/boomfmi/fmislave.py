@@ -73,6 +73,7 @@ class BoomSlave(Fmi2Slave):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self.failure: Optional[str] = None
+        self.start_time = 0.0
         for var in self.variables:
             owner_attr = getattr(type(self), var.name, None)
             if not isinstance(owner_attr, property):
@@ -105,6 +106,9 @@ class BoomSlave(Fmi2Slave):
         if self.failure is None:
             self.failure = message
         self.log(message, Fmi2Status.error)
+
+    def setup_experiment(self, start_time, stop_time, tolerance):
+        self.start_time = float(start_time)
 
     def exit_initialization_mode(self):
         try:

@@ -14,7 +14,11 @@ from .experiments import profile
 from .recording import RecordingWriter
 from .system.instance import FmuError, FmuInstance
 
-COLUMNS = ("t", "u", "p_a", "p_b", "alpha", "f_ext", "x", "u_cmd", "link_ok", "failsafe", "t_rig")
+#: A row holds the sample measured at ``t`` and the command the valve got from ``t`` on
+#: (``u``; ``u_cmd`` is what was sent, which differs while the rig is in fail-safe).
+#: ``x_alpha`` is x from the measured alpha by Eq. 12 (the format's ``x`` is a direct
+#: measurement, which the bridge does not have).
+COLUMNS = ("t", "u", "p_a", "p_b", "alpha", "f_ext", "x_alpha", "u_cmd", "link_ok", "failsafe", "t_rig")
 OUTPUTS = ("u_applied", "p_a", "p_b", "alpha", "f_ext", "x", "link_ok", "failsafe", "t_rig", "lost_packets")
 
 
@@ -35,23 +39,26 @@ def record_experiment(fmu, rig: str, out, experiment: str = "paper_multistep", s
     with FmuInstance(fmu, name="hardware_bridge") as bridge, \
             RecordingWriter(out, COLUMNS, sidecar={"notes": f"recorded from {rig}, experiment {experiment}"}) as w:
         bridge.initialize(parameters, start_time=0.0, stop_time=stop, inputs={"u": command(0.0)["u"]})
-
-        def write(t: float, u_cmd: float) -> None:
-            o = bridge.get(*OUTPUTS)
-            w.write((t, o["u_applied"], o["p_a"], o["p_b"], o["alpha"], o["f_ext"], o["x"], u_cmd,
-                     float(o["link_ok"]), float(o["failsafe"]), o["t_rig"]))
-            bridge.lost = o["lost_packets"]
-
-        write(0.0, command(0.0)["u"])
-        rows = 1
+        y = bridge.get(*OUTPUTS)                        # the sample at t_k
         for k in range(n):
             t = k * step
             u = command(t)["u"]
             bridge.set(u=u)
-            bridge.step_to(t, step)
-            write((k + 1) * step, u)
+            try:
+                bridge.step_to(t, step)
+            except FmuError:
+                w.write((t, u, y["p_a"], y["p_b"], y["alpha"], y["f_ext"], y["x"], u, 0.0,
+                         float(y["failsafe"]), y["t_rig"]))
+                raise
+            nxt = bridge.get(*OUTPUTS)                  # u_applied: what the valve got over [t_k, t_k+1)
+            w.write((t, nxt["u_applied"], y["p_a"], y["p_b"], y["alpha"], y["f_ext"], y["x"], u,
+                     float(y["link_ok"]), float(y["failsafe"]), y["t_rig"]))
             rows += 1
-        return {"rows": rows, "lost_packets": bridge.lost}
+            y = nxt
+        u = command(n * step)["u"]
+        w.write((n * step, u, y["p_a"], y["p_b"], y["alpha"], y["f_ext"], y["x"], u,
+                 float(y["link_ok"]), float(y["failsafe"]), y["t_rig"]))
+        return {"rows": rows + 1, "lost_packets": y["lost_packets"]}
 
 
 __all__ = ["record_experiment", "FmuError", "COLUMNS"]

@@ -23,6 +23,10 @@ import numpy as np
 from .physics import reference_rig as rig
 
 REQUIRED = ("t", "u", "p_a", "p_b", "alpha")
+#: Reference-rig values a sidecar may override (``{"rig": {...}}``), by the FMUs'
+#: parameter names (SI, pressures absolute), plus the spec's own example key.
+RIG_KEYS = ("A_max", "P_s", "P_e", "k", "R", "T", "A_a", "A_b", "L", "V_a0", "V_b0", "a", "b",
+            "h", "l_min", "K_v", "F_s", "F_d", "F_L", "M", "P_atm", "supply_pressure_gauge")
 OPTIONAL = ("f_ext", "x")
 UNITS = {"t": "s", "u": "V", "p_a": "Pa (gauge)", "p_b": "Pa (gauge)", "alpha": "rad",
          "f_ext": "N", "x": "m"}
@@ -55,6 +59,14 @@ class Recording:
     @property
     def P_atm(self) -> float:
         return float(self.rig.get("P_atm", rig.P_atm))
+
+    def rig_values(self) -> dict:
+        """The sidecar's overrides by parameter name (``supply_pressure_gauge`` becomes
+        the absolute ``P_s``)."""
+        values = {k: float(v) for k, v in self.rig.items() if k != "supply_pressure_gauge"}
+        if "supply_pressure_gauge" in self.rig:
+            values["P_s"] = self.P_atm + float(self.rig["supply_pressure_gauge"])
+        return values
 
 
 def read_recording(path) -> Recording:
@@ -160,6 +172,8 @@ def _read_sidecar(path: Path) -> dict:
     if not isinstance(rig_over, dict):
         raise RecordingError(side, "'rig' must be an object of reference-rig values")
     for k, v in rig_over.items():
+        if k not in RIG_KEYS:
+            raise RecordingError(side, f"unknown rig value {k!r}; a sidecar may set {', '.join(RIG_KEYS)}")
         if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
             raise RecordingError(side, f"rig value {k!r} must be a finite number, not {v!r}")
     return content

@@ -71,7 +71,6 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
         times = np.round(np.arange(0.0, stop_time + 1e-12, 1e-3), 12)
     times = np.asarray(times, dtype=float)
     L = model.cylinder.L
-    K_v, F_s, F_d, _, M = model.load
     atol = np.array([1e-4, 1e-4, 1e-13, 1e-11])
 
     cuts = sorted({float(b) for b in breakpoints if 0.0 < b < stop_time} | {stop_time})
@@ -108,7 +107,7 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
                     return [dp_a, dp_b, 0.0, 0.0]
                 phi = ph.phi_from_x(y[2], model.geometry)
                 F = ph.drive_force(y[0], y[1], phi, f_ext, model.cylinder, model.load, model.P_atm)
-                return [dp_a, dp_b, y[3], (F - K_v * y[3] - s * F_d * math.cos(phi)) / M]
+                return [dp_a, dp_b, y[3], ph.sliding_acceleration(y[3], F, phi, s, model.load)]
 
             # each event sits a hair past its threshold (1e-12 m/s, 1e-12 m, 1e-9 N), so a
             # segment that starts on a threshold does not trigger it again at once

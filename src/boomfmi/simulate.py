@@ -31,6 +31,17 @@ def _unique(names: list[str], short: str, what: str) -> str:
     return hits[0]
 
 
+def rig_parameters(experiment: str, parameters: dict) -> dict:
+    """A recording's sidecar overrides as SSP parameters: each value goes to every
+    component parameter of that name (``P_s`` to ``valve.P_s``, ``a`` to
+    ``boom_load.a``...)."""
+    if experiment in PROFILES:
+        return {}
+    over = read_recording(experiment).rig_values()
+    return {f"{comp}.{name}": value for name, value in over.items()
+            for comp, names in parameters.items() if name in names}
+
+
 def experiment_inputs(experiment: str, input_names: list[str]):
     """``(inputs, stop_time)`` for a named profile or a recording's ``u`` column, driving
     every input in ``input_names`` with the same command."""
@@ -50,6 +61,25 @@ def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
                    stop_time: float | None = None, algorithm: str = "gauss-seidel",
                    parameters=None, progress: bool = False) -> pd.DataFrame:
     """Simulate ``experiment`` on the SSP; return recording columns plus x and v."""
+    if experiment not in PROFILES:
+        if Path(experiment).suffix.lower() != ".csv" and not Path(experiment).exists():
+            raise ValueError(f"unknown experiment {experiment!r}: give one of {', '.join(PROFILES)} "
+                             f"or a recording (.csv)")
+        from .system.ssp import read_ssp
+        from fmpy import read_model_description
+        import tempfile
+        structure = read_ssp(ssp)
+        names = {}
+        with tempfile.TemporaryDirectory() as tmp:
+            for comp in structure.components.values():
+                f = Path(tmp) / f"{comp.name}.fmu"
+                f.write_bytes(structure.read(comp.source))
+                names[comp.name] = {v.name for v in read_model_description(str(f)).modelVariables
+                                    if v.causality == "parameter"}
+        over = rig_parameters(experiment, names)
+        if over:
+            parameters = [over, *([] if parameters is None else
+                                  [parameters] if isinstance(parameters, (str, Path, dict)) else list(parameters))]
     with CoSimulation(ssp, step, algorithm, parameters) as cosim:
         u_names = [n for n in cosim.inputs if n.rpartition(".")[2] == "u"]
         if not u_names:

@@ -34,13 +34,17 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
     if len(rigs) > 1:
         raise ValueError("the recordings come from different rigs (their sidecars' 'rig' values differ): "
                          + ", ".join(str(r.path) for r in recs))
-    overrides = recs[0].rig
-    P_atm = float(overrides.get("P_atm", rig.P_atm))
-    preps = [prepare(r, cutoff, P_atm=P_atm) for r in recs]
+    over = recs[0].rig_values()
+    P_atm = recs[0].P_atm
+    geom = ph.Geometry(**{k: over[k] for k in ph.Geometry._fields if k in over})
+    cyl = ph.Cylinder(**{k: over[k] for k in ph.Cylinder._fields if k in over})
+    valve = ph.Valve(**{k: over[k] for k in ("P_s", "P_e", "A_max") if k in over})
+    gas = ph.Gas(**{k: over[k] for k in ph.Gas._fields if k in over})
+    preps = [prepare(r, cutoff, geometry=geom, P_atm=P_atm) for r in recs]
     if method == "fit":
-        result = identify(preps, P_atm=P_atm, with_A_max=with_A_max)
+        result = identify(preps, cyl, geom, P_atm=P_atm, with_A_max=with_A_max, valve=valve, gas=gas)
     elif method == "paper":
-        result = identify_paper(preps, P_atm=P_atm, eq13=eq13)
+        result = identify_paper(preps, cyl, P_atm=P_atm, eq13=eq13)
     else:
         raise ValueError(f"unknown method {method!r}: 'paper' or 'fit'")
     result.details["recordings"] = [str(p) for p in paths]

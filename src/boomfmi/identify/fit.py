@@ -88,8 +88,11 @@ def sliding_samples(p: Prepared, L: float, v_min: float = 0.01, margin: float = 
     return ~bad
 
 
-def piston_force(p_a, p_b, cyl: ph.Cylinder, P_atm: float):
-    return ph.piston_force(p_a, p_b, cyl, P_atm)
+def correlation_samples(p: Prepared) -> float:
+    """Samples over which the residuals of filtered data stay correlated: about one
+    period of the low-pass filter's cut-off, fs / (2 cutoff) (20 at 1 kHz and 25 Hz).
+    Interval widths from least squares are scaled by its square root."""
+    return max(1.0, p.fs / (2.0 * p.cutoff))
 
 
 def equation_error(preps: list[Prepared], cyl: ph.Cylinder, P_atm: float, L: float,
@@ -100,7 +103,7 @@ def equation_error(preps: list[Prepared], cyl: ph.Cylinder, P_atm: float, L: flo
         m = sliding_samples(p, L)
         cos_s = np.cos(p.phi) * np.sign(p.v)
         X.append(np.column_stack([p.a, p.v, cos_s, np.sin(p.phi)])[m])
-        y.append(piston_force(p.p_a, p.p_b, cyl, P_atm)[m])
+        y.append(ph.piston_force(p.p_a, p.p_b, cyl, P_atm)[m])
         groups.append(np.full(m.sum(), i))
     X, y = np.vstack(X), np.concatenate(y)
     if len(y) < 50:
@@ -194,7 +197,7 @@ SLOW_START = 0.005
 
 def _crossing_time(p: Prepared, i: int, band: float, cyl, P_atm, F_L) -> float:
     """Time [s] the drive force needs to cross ``band`` [N] at its rate around sample i."""
-    F = ph.piston_force(p.p_a, p.p_b, cyl, P_atm) - F_L * np.sin(p.phi)
+    F = ph.drive_force(p.p_a, p.p_b, p.phi, 0.0, cyl, ph.Load(F_L=F_L), P_atm)
     j0, j1 = max(0, i - int(0.03 * p.fs)), max(1, i - int(0.005 * p.fs))
     rate = abs(float(np.mean(np.gradient(F[j0:j1 + 1], p.t[j0:j1 + 1]))))
     return band / rate if rate > 0 else np.inf
@@ -239,8 +242,7 @@ def fit_static_friction(preps, base: dict, cyl, geom, P_atm, L):
     n = sum(int(moved.sum()) for *_, moved in wins)
     curv = max((cp - 2 * c0 + cm) / h**2, 1e-30)
     sigma2 = c0 / max(n - 1, 1)
-    corr = 20.0                                   # samples: the motion's correlation length
-    half = 1.96 * math.sqrt(2.0 * sigma2 * corr / curv)
+    half = 1.96 * math.sqrt(2.0 * sigma2 * correlation_samples(preps[0]) / curv)
     return Estimate(F_s, (F_s - half, F_s + half), "N"), {"breakaways": all_starts, "used": len(wins)}
 
 
@@ -270,7 +272,7 @@ def refine(preps, start: dict, cyl, geom, P_atm, L):
     dof = max(len(res.fun) - len(names), 1)
     sigma2 = float(res.fun @ res.fun) / dof
     try:
-        cov = np.linalg.inv(J.T @ J) * sigma2 * 20.0
+        cov = np.linalg.inv(J.T @ J) * sigma2 * correlation_samples(preps[0])
     except np.linalg.LinAlgError:
         cov = np.full((len(names), len(names)), np.inf)
     est = {}
@@ -286,12 +288,9 @@ def fit_A_max(preps: list[Prepared], cyl: ph.Cylinder, valve: ph.Valve, gas: ph.
     ``(V dp/dt + k p dV/dt) / (k R T)`` against Eq. 1's flow per unit area."""
     X, y = [], []
     unit = valve._replace(A_max=1.0)
-    k, R, T = gas
     for p in preps:
-        V_a, V_b = ph.chamber_volumes(p.x, cyl)
-        dpa, dpb = np.gradient(p.p_a, p.t), np.gradient(p.p_b, p.t)
-        mdot_a = (V_a * dpa + k * p.p_a * cyl.A_a * p.v) / (k * R * T)
-        mdot_b = (V_b * dpb - k * p.p_b * cyl.A_b * p.v) / (k * R * T)
+        mdot_a, mdot_b = ph.chamber_inflows(p.p_a, p.p_b, np.gradient(p.p_a, p.t), np.gradient(p.p_b, p.t),
+                                            p.x, p.v, cyl, gas)
         g_a, g_b = ph.chamber_flows(p.u, p.p_a, p.p_b, unit, gas)
         m = _dilate(np.abs(np.diff(p.u, prepend=p.u[0])) > 0, int(0.02 * p.fs))
         use = ~m & (np.abs(p.u - valve.u_centre) > 0.5)
@@ -304,7 +303,7 @@ def fit_A_max(preps: list[Prepared], cyl: ph.Cylinder, valve: ph.Valve, gas: ph.
         return None
     A = float(X @ y / (X @ X))
     r = y - A * X
-    se = math.sqrt(float(r @ r) / max(len(y) - 1, 1) / float(X @ X) * 20.0)
+    se = math.sqrt(float(r @ r) / max(len(y) - 1, 1) / float(X @ X) * correlation_samples(preps[0]))
     return Estimate(A, (A - 1.96 * se, A + 1.96 * se), "m2")
 
 

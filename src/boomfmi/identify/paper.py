@@ -49,8 +49,7 @@ def _starts(preps: list[Prepared], cyl: ph.Cylinder, P_atm: float, L: float):
     for p in preps:
         for k in breakaways(p, L):
             i = onset(p, k)
-            gauge_a, gauge_b = p.p_a[i] - P_atm, p.p_b[i] - P_atm
-            F = gauge_a * cyl.A_a - gauge_b * cyl.A_b                      # Eq. 14
+            F = float(ph.piston_force(p.p_a[i], p.p_b[i], cyl, P_atm))   # Eq. 14, gauge form
             extending = p.x[k] > p.x[i]
             (pos if extending else neg).append((F, float(p.phi[i]), float(p.t[i])))
     return pos, neg
@@ -76,7 +75,7 @@ def _constant_acceleration_states(preps, F_L, cyl, P_atm, L, window=0.03, margin
                     best, best_std = s, sd
             sl = slice(best, best + n)
             phi = p.phi[sl]
-            A = float(np.mean((p.p_a[sl] - P_atm) * cyl.A_a - (p.p_b[sl] - P_atm) * cyl.A_b - F_L * np.sin(phi)))
+            A = float(np.mean(ph.drive_force(p.p_a[sl], p.p_b[sl], phi, 0.0, cyl, ph.Load(F_L=F_L), P_atm)))
             states.append(dict(t=float(p.t[best]), A=A, B=float(np.mean(p.v[sl])),
                                C=float(np.mean(np.cos(phi))), D=float(np.mean(p.a[sl]))))
     return states

@@ -44,6 +44,7 @@ class Prepared:
     p_a_raw: np.ndarray    #: unfiltered absolute pressures [Pa]
     p_b_raw: np.ndarray
     fs: float
+    cutoff: float = CUTOFF  #: the low-pass filter's cut-off [Hz]
     source: str = ""
 
     @property
@@ -71,4 +72,4 @@ def prepare(rec: Recording, cutoff: float = CUTOFF, geometry: ph.Geometry = ph.G
     return Prepared(t=t, u=d["u"].to_numpy(dtype=float), p_a=lowpass(p_a_raw, fs, cutoff),
                     p_b=lowpass(p_b_raw, fs, cutoff), x=x, v=v, a=a,
                     phi=ph.phi_from_x(np.clip(x, 0.0, None), geometry), x_raw=x_raw,
-                    p_a_raw=p_a_raw, p_b_raw=p_b_raw, fs=fs, source=str(rec.path))
+                    p_a_raw=p_a_raw, p_b_raw=p_b_raw, fs=fs, cutoff=cutoff, source=str(rec.path))

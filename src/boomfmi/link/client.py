@@ -47,12 +47,13 @@ class RigClient:
         except OSError:
             pass            # a refused or unreachable rig shows as a missing answer
 
-    def exchange(self, u: float | None, t: float) -> Sample | None:
-        """Send a command (``u``) or, with ``u=None``, a status request; return the rig's
-        answer, or None when none arrives within the timeout."""
+    def exchange(self, u: float | None, t: float, dt: float = 1e-3) -> Sample | None:
+        """Send a command (``u`` for the step from ``t`` to ``t + dt``) or, with
+        ``u=None``, a status request; return the rig's answer, or None when none arrives
+        within the timeout."""
         self.seq += 1
         seq = self.seq
-        self._send(encode_status(seq, t, self.key) if u is None else encode_command(seq, t, u, self.key))
+        self._send(encode_status(seq, t, self.key) if u is None else encode_command(seq, t, u, self.key, dt))
         deadline = time.perf_counter() + self.timeout
         while True:
             remaining = deadline - time.perf_counter()

@@ -12,7 +12,8 @@ Payload header (20 bytes), then the body, zero-padded to 80 bytes::
     flags   u32 samples: bit 0 fail-safe engaged, bit 1 rig in lockstep
     t       f64 commands: the sender's time [s]; samples: the rig's sample time [s]
 
-    command body:  u f64 (valve command [V])
+    command body:  u f64 (valve command [V]), dt f64 (the step it is for [s]: a lockstep
+                   rig advances by dt, once per distinct t)
     status body:   (none; asks for the current sample without stepping a lockstep rig)
     sample body:   u_applied, p_a, p_b, alpha, f_ext, x (f64 each: V, Pa gauge, Pa gauge,
                    rad, N, m), echo u32 (the seq of the command or status request this
@@ -43,7 +44,7 @@ KEY_ENV = "BOOMFMI_LINK_KEY"
 MIN_KEY_BYTES = 16
 
 _HEADER = struct.Struct("<2sBBIId")
-_COMMAND = struct.Struct("<2sBBIIdd")
+_COMMAND = struct.Struct("<2sBBIIddd")
 _SAMPLE = struct.Struct("<2sBBIId6dII")
 
 
@@ -63,6 +64,7 @@ class Command(NamedTuple):
     seq: int
     t: float
     u: float
+    dt: float = 1e-3
 
 
 class StatusRequest(NamedTuple):
@@ -122,8 +124,8 @@ def _seal(payload: bytes, key: bytes) -> bytes:
     return payload + hmac.new(key, payload, hashlib.sha256).digest()
 
 
-def encode_command(seq: int, t: float, u: float, key: bytes) -> bytes:
-    return _seal(_COMMAND.pack(MAGIC, VERSION, COMMAND, seq, 0, t, u), key)
+def encode_command(seq: int, t: float, u: float, key: bytes, dt: float = 1e-3) -> bytes:
+    return _seal(_COMMAND.pack(MAGIC, VERSION, COMMAND, seq, 0, t, u, dt), key)
 
 
 def encode_status(seq: int, t: float, key: bytes) -> bytes:
@@ -148,10 +150,10 @@ def decode(datagram: bytes, key: bytes):
     if magic != MAGIC or version != VERSION:
         raise Malformed(f"magic {magic!r} version {version}")
     if kind == COMMAND:
-        u = _COMMAND.unpack_from(payload)[6]
-        if not math.isfinite(u):
-            raise Malformed("a command that is not a finite number")
-        return Command(seq, t, u)
+        u, dt = _COMMAND.unpack_from(payload)[6:8]
+        if not (math.isfinite(u) and math.isfinite(dt) and 0.0 < dt <= 1.0):
+            raise Malformed("a command whose u or dt is not a finite number (dt in (0, 1] s)")
+        return Command(seq, t, u, dt)
     if kind == STATUS:
         return StatusRequest(seq, t)
     if kind == SAMPLE:

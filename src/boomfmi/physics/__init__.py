@@ -6,11 +6,11 @@ inside this package, so that ``build_fmus.py`` can bundle it into each FMU under
 name of that FMU's own.
 """
 from . import reference_rig
-from .chamber import chamber_pressure_step, chamber_volumes, pressure_rates
+from .chamber import chamber_inflows, chamber_pressure_step, chamber_volumes, pressure_rates
 from .force_estimation import pneumatic_stiffness, position_error_force, reflected_force
 from .geometry import alpha_from_x, check_geometry, cylinder_length, phi_from_x, x_from_alpha
 from .load import (acceleration, advance_load, drive_force, friction_force, piston_force,
-                   slide_or_stick)
+                   slide_or_stick, sliding_acceleration)
 from .orifice import (critical_pressure_ratio, mass_flow, mass_flow_slope, signed_mass_flow,
                       signed_mass_flow_slope)
 from .params import (Cylinder, Gas, Geometry, Load, Valve, check_cylinder, check_gas,
@@ -26,5 +26,5 @@ __all__ = [
     "critical_pressure_ratio", "mass_flow", "signed_mass_flow", "Cylinder", "Gas",
     "Geometry", "Load", "Valve", "check_cylinder", "check_gas", "check_load",
     "check_valve", "ParameterError", "chamber_flows", "orifice_area", "chamber_flow_slopes",
-    "mass_flow_slope", "signed_mass_flow_slope",
+    "mass_flow_slope", "signed_mass_flow_slope", "chamber_inflows", "sliding_acceleration",
 ]

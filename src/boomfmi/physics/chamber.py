@@ -29,6 +29,16 @@ def pressure_rates(p_a, p_b, mdot_a, mdot_b, x, v, cyl: Cylinder = Cylinder(),
     return dp_a, dp_b
 
 
+def chamber_inflows(p_a, p_b, dp_a, dp_b, x, v, cyl: Cylinder = Cylinder(), gas: Gas = Gas()):
+    """Eq. 7 solved for the flows: the mass flows into chambers A and B [kg/s] that the
+    pressures ``p_a``, ``p_b`` [Pa], their rates ``dp_a``, ``dp_b`` [Pa/s] and the
+    piston's ``x`` [m], ``v`` [m/s] imply."""
+    k, R, T = gas
+    V_a, V_b = chamber_volumes(x, cyl)
+    return ((V_a * dp_a + k * p_a * cyl.A_a * v) / (k * R * T),
+            (V_b * dp_b - k * p_b * cyl.A_b * v) / (k * R * T))
+
+
 def _mean_power(V_0: float, V_1: float, exponent: float) -> float:
     """Mean of V^exponent over a linear ramp from V_0 to V_1, divided by V_0^exponent.
 

@@ -57,6 +57,12 @@ def acceleration(v, F_drive, phi, load: Load = Load()):
     return (F_drive - load.K_v * v - friction_force(v, F_drive, phi, load)) / load.M
 
 
+def sliding_acceleration(v, F_drive, phi, direction, load: Load = Load()):
+    """Eq. 8 while sliding in ``direction`` (+1 extending, -1 retracting) [m/s^2]: the
+    Coulomb friction ``F_d cos(phi)`` opposes the motion, also at the instant v = 0."""
+    return (F_drive - load.K_v * v - direction * load.F_d * xp.cos(phi)) / load.M
+
+
 def _phi1(z: float) -> float:
     """(e^z - 1) / z, equal to 1 at z = 0."""
     return math.expm1(z) / z if abs(z) > 1e-5 else 1.0 + z / 2.0 + z * z / 6.0

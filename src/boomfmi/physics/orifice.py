@@ -20,6 +20,8 @@ nothing outside that band.
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 from . import _xp as xp
 from .params import Gas
 
@@ -38,6 +40,16 @@ def _subsonic_root(r, k):
     return xp.sqrt(xp.maximum(r ** (2.0 / k) - r ** ((k + 1.0) / k), 0.0))
 
 
+@lru_cache(maxsize=64)
+def _constants(k: float, R: float, T: float):
+    """(P_cr, subsonic coefficient, choked flow per area and pressure, laminar slope) for
+    a gas: computed once per gas, not on every call."""
+    C = (2.0 * k / (R * T * (k - 1.0))) ** 0.5
+    choked = (k / (R * T)) ** 0.5 * (2.0 / (k + 1.0)) ** ((k + 1.0) / (2.0 * (k - 1.0)))
+    laminar = C * _subsonic_root(R_LAMINAR, k) / (1.0 - R_LAMINAR)
+    return critical_pressure_ratio(k), C, choked, laminar
+
+
 def mass_flow(A, P_u, P_d, gas: Gas = Gas()):
     """Mass flow [kg/s] from upstream to downstream through an orifice.
 
@@ -51,29 +63,26 @@ def mass_flow(A, P_u, P_d, gas: Gas = Gas()):
     gas : Gas
         k [1], R [J/(kg K)], T [K].
     """
-    k, R, T = gas
-    P_cr = critical_pressure_ratio(k)
+    k = gas.k
+    P_cr, C, choked, laminar_slope = _constants(*gas)
     r = xp.clip(P_d / P_u, 0.0, 1.0)
-    C = (2.0 * k / (R * T * (k - 1.0))) ** 0.5
     subsonic = C * _subsonic_root(xp.minimum(r, R_LAMINAR), k)
-    laminar = C * _subsonic_root(R_LAMINAR, k) * (1.0 - r) / (1.0 - R_LAMINAR)
-    choked = (k / (R * T)) ** 0.5 * (2.0 / (k + 1.0)) ** ((k + 1.0) / (2.0 * (k - 1.0)))
+    laminar = laminar_slope * (1.0 - r)
     return A * P_u * xp.where(r >= P_cr, xp.where(r > R_LAMINAR, laminar, subsonic), choked)
 
 
 def mass_flow_slope(A, P_u, P_d, gas: Gas = Gas()):
     """d mdot / d P_d [kg/(s Pa)] of :func:`mass_flow` at fixed P_u (<= 0: a higher
     downstream pressure lets less air through)."""
-    k, R, T = gas
-    P_cr = critical_pressure_ratio(k)
+    k = gas.k
+    P_cr, C, _, laminar_slope = _constants(*gas)
     r = xp.clip(P_d / P_u, 0.0, 1.0)
-    C = (2.0 * k / (R * T * (k - 1.0))) ** 0.5
     rs = xp.minimum(r, R_LAMINAR)
     root = _subsonic_root(rs, k)
     # d/dr sqrt(g(r)) = g'(r) / (2 sqrt(g)),  g = r^(2/k) - r^((k+1)/k)
     g_prime = (2.0 / k) * rs ** (2.0 / k - 1.0) - ((k + 1.0) / k) * rs ** (1.0 / k)
     d_subsonic = C * g_prime / (2.0 * xp.maximum(root, 1e-300))
-    d_laminar = -C * _subsonic_root(R_LAMINAR, k) / (1.0 - R_LAMINAR)
+    d_laminar = -laminar_slope
     d_dr = xp.where(r >= P_cr, xp.where(r > R_LAMINAR, d_laminar, d_subsonic), 0.0)
     return A * d_dr        # A P_u d/dr * dr/dP_d, with dr/dP_d = 1 / P_u
 

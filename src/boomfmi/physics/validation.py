@@ -42,10 +42,3 @@ def require_non_negative(name: str, value: float) -> None:
     require_finite(name, value)
     if value < 0.0:
         raise ParameterError(name, value, "must be >= 0")
-
-
-def require_in_range(name: str, value: float, lo: float, hi: float) -> None:
-    """Raise unless ``lo <= value <= hi``."""
-    require_finite(name, value)
-    if not lo <= value <= hi:
-        raise ParameterError(name, value, f"must lie in [{lo:g}, {hi:g}]")

@@ -16,15 +16,17 @@ from .plant import VirtualRig, load_config
 
 def run_offline(config, command: Callable[[float], dict], duration: float, dt: float = 1e-3) -> pd.DataFrame:
     """Step a virtual rig (``config``: see :func:`boomfmi.rig.load_config`) under
-    ``command(t) -> {"u": V}`` for ``duration`` seconds; one row per sample, t0 included."""
+    ``command(t) -> {"u": V}`` for ``duration`` seconds; one row per sample, t0 included.
+    A row holds the sample measured at t and the command applied from t on."""
     plant = VirtualRig(load_config(config))
     n = int(round(duration / dt))
     rows = np.empty((n + 1, 7))
     s = plant.measure()
-    rows[0] = (s.t, s.u_applied, s.p_a, s.p_b, s.alpha, s.f_ext, s.x)
-    for k in range(n):
-        s = plant.step(command(k * dt)["u"], dt)
-        rows[k + 1] = (s.t, s.u_applied, s.p_a, s.p_b, s.alpha, s.f_ext, s.x)
+    for k in range(n + 1):            # a row: the sample at t_k and the command from t_k on
+        u = float(command(k * dt)["u"])
+        rows[k] = (s.t, u, s.p_a, s.p_b, s.alpha, s.f_ext, s.x)
+        if k < n:
+            s = plant.step(u, dt)
     df = pd.DataFrame(rows, columns=["t", "u", "p_a", "p_b", "alpha", "f_ext", "x"])
     df["t"] = np.round(df["t"].to_numpy(), 9)
     return df

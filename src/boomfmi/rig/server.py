@@ -3,10 +3,11 @@
 ``RigServer`` binds to loopback (unless told otherwise) and answers the bridge:
 
 * a **command** (valve voltage) is applied from its arrival; in lockstep the rig then
-  advances exactly one sample (1 ms), unless the command repeats the time of the last
-  one (a retry after a lost answer, which must not step twice), and answers with the
-  new sample; in real time the rig advances on its own clock at 1 kHz and answers with
-  its latest sample at once;
+  advances by the command's step ``dt``, unless the command repeats the time of that
+  sender's previous one (a retry after a lost answer, which must not step twice), and
+  answers with the new sample; a sender whose time goes back (a new run) is stepped
+  too.  In real time the rig advances on its own clock at 1 kHz and answers with its
+  latest sample at once;
 * a **status request** is answered with the current sample without stepping.
 
 Datagrams that are malformed, fail authentication or repeat an old sequence number
@@ -16,7 +17,9 @@ and reports the fail-safe state in every sample until commands resume.
 
 With ``record`` the rig writes every sample it measures in the recording format, plus
 ``f_ext`` (the true external force), ``x`` (the true position) and ``failsafe``, row by
-row and crash-safe.
+row and crash-safe.  A row holds the sample measured at its time ``t`` and the
+command the valve gets from ``t`` on (until the next row), as a DAQ loop reads its
+sensors and writes its output at each tick.
 """
 from __future__ import annotations
 
@@ -69,28 +72,28 @@ class RigServer:
         self.counters = Counters()
         self.u_cmd = rig.u_centre
         self.last_command_wall = time.perf_counter()
-        self.last_command_t = None
+        self.last_command_t: dict = {}           # per sender: the time of its last command
         self.failsafe = False
         self.seq = 0
         self.sample = plant.measure()
         self.writer = RecordingWriter(record, COLUMNS) if record else None
-        self._record(self.sample)
         self._stop = False
 
     # -- the plant ---------------------------------------------------------------------------
-    def _record(self, s) -> None:
+    def _record(self, s, u: float) -> None:
         if self.writer:
-            self.writer.write((s.t, s.u_applied, s.p_a, s.p_b, s.alpha, s.f_ext, s.x, float(self.failsafe)))
+            self.writer.write((s.t, u, s.p_a, s.p_b, s.alpha, s.f_ext, s.x, float(self.failsafe)))
 
     def _watchdog(self, now: float) -> None:
         if not self.failsafe and now - self.last_command_wall > self.watchdog:
             self.failsafe = True
             self.counters.failsafe_entries += 1
 
-    def _advance(self) -> None:
+    def _advance(self, dt: float | None = None) -> None:
+        """Record the current sample with the command applied from now, then step."""
         u = rig.u_centre if self.failsafe else self.u_cmd
-        self.sample = self.plant.step(u, self.dt)
-        self._record(self.sample)
+        self._record(self.sample, u)
+        self.sample = self.plant.step(u, dt or self.dt)
 
     # -- the link ----------------------------------------------------------------------------
     def _reply(self, addr, echo: int) -> None:
@@ -128,9 +131,11 @@ class RigServer:
         self.u_cmd = min(max(msg.u, rig.u_min), rig.u_max)
         self.last_command_wall = time.perf_counter()
         self.failsafe = False
-        if self.lockstep and (self.last_command_t is None or msg.t > self.last_command_t + 0.5 * self.dt):
-            self._advance()
-            self.last_command_t = msg.t
+        if self.lockstep:
+            last = self.last_command_t.get(addr)
+            if last is None or abs(msg.t - last) > 0.5 * msg.dt:     # not a retry of the last one
+                self._advance(msg.dt)
+                self.last_command_t[addr] = msg.t
         self._reply(addr, msg.seq)
 
     def _drain(self) -> None:
@@ -181,6 +186,7 @@ class RigServer:
 
     def close(self) -> None:
         if self.writer:
+            self._record(self.sample, rig.u_centre if self.failsafe else self.u_cmd)
             self.writer.close()
             self.writer = None
         self.sock.close()

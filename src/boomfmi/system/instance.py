@@ -60,11 +60,15 @@ class FmuInstance:
             addLoggerProxy(byref(self._callbacks))
         except Exception:  # pragma: no cover - fmpy without its logging proxy
             pass
-        self.fmu = FMU2Slave(guid=self.model_description.guid, unzipDirectory=self._unzip_dir,
-                             modelIdentifier=self.model_description.coSimulation.modelIdentifier,
-                             instanceName=self.name)
-        self._call("fmi2Instantiate", self.fmu.instantiate, callbacks=self._callbacks,
-                   loggingOn=debug_logging)
+        try:
+            self.fmu = FMU2Slave(guid=self.model_description.guid, unzipDirectory=self._unzip_dir,
+                                 modelIdentifier=self.model_description.coSimulation.modelIdentifier,
+                                 instanceName=self.name)
+            self._call("fmi2Instantiate", self.fmu.instantiate, callbacks=self._callbacks,
+                       loggingOn=debug_logging)
+        except BaseException:
+            shutil.rmtree(self._unzip_dir, ignore_errors=True)
+            raise
         self._closed = False
         self.time = 0.0
 

@@ -110,6 +110,7 @@ class CoSimulation:
                     raise SspError(f"{path}: no such parameter set")
                 self.structure.bind(read_ssv(path.read_bytes(), str(path)), str(path))
         self._tmp = tempfile.TemporaryDirectory(prefix="boomfmi_ssp_")
+        self._ran = False
         self.instances: dict[str, FmuInstance] = {}
         try:
             for name, comp in self.structure.components.items():
@@ -222,6 +223,9 @@ class CoSimulation:
         DataFrame with a ``t`` (or ``time``) column whose rows hold from their time to
         the next.  An input not given keeps its start value.
         """
+        if self._ran:
+            raise RuntimeError("a CoSimulation runs once (its FMUs have left initialisation); make a new one")
+        self._ran = True
         s = self.structure
         t0 = s.start_time if start_time is None else float(start_time)
         t_end = s.stop_time if stop_time is None else float(stop_time)
@@ -301,6 +305,11 @@ class CoSimulation:
         return pd.DataFrame(rows, columns=columns)
 
     def _input_start(self, name: str) -> float:
+        """A run's input starts at its parameter binding's value, else at the start value
+        of the FMU input it is (or it drives)."""
+        bound = self.structure.parameters.get(name)
+        if bound is not None:
+            return float(bound.value)
         element, _, connector = name.rpartition(".")
         if element:
             var = self.instances[element].variables[connector]
