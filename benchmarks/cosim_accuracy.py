@@ -74,7 +74,7 @@ def main(argv=None) -> int:
     profile = paper_multistep()
     stop = profile.duration
     t = time.perf_counter()
-    ref = simulate_reference(Model(), profile, stop, breakpoints=[1, 3, 4, 6, 7])
+    ref = simulate_reference(Model(), profile, stop, breakpoints=profile.breakpoints)
     print(f"reference: LSODA rtol 1e-9, {stop:g} s in {time.perf_counter() - t:.2f} s wall")
 
     tables = []

@@ -108,7 +108,8 @@ def test_teleoperation_ssp_model_tracks_the_rig(ssp_path, rig, tmp_path):
     link = write_ssv(tmp_path / "link.ssv", "link", {"hardware_bridge.rig": (r.url, None)})
     result = run_experiment(ssp_path.parent / "teleoperation.ssp", "paper_multistep", parameters=link)
     r.stop()
-    assert {"x", "x_measured", "p_a", "p_a_measured", "u_applied"} <= set(result.columns)
+    assert {"x", "x_measured", "p_a", "p_a_measured", "u_applied", "link_ok", "lost_packets"} <= set(result.columns)
+    assert result["link_ok"].all() and (result["lost_packets"] == 0).all()
     span = result["x_measured"].max() - result["x_measured"].min()
     nrmse_x = np.sqrt(np.mean((result["x"] - result["x_measured"]) ** 2)) / span
     assert span > 0.05 and nrmse_x < 0.02

@@ -8,7 +8,7 @@ the columns of a recording (``t, u, p_a, p_b, alpha``, gauge pressures) plus ``x
 are found by name among the model components' outputs (``p_a`` is the one output
 called ``p_a``), not wired here.  Where the system holds a hardware bridge, its
 measurements follow as ``p_a_measured``, ``p_b_measured``, ``alpha_measured``,
-``x_measured`` and ``u_applied``.
+``x_measured``, ``u_applied`` and the link's ``link_ok``, ``failsafe``, ``lost_packets``.
 """
 from __future__ import annotations
 
@@ -89,7 +89,7 @@ def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
         result = cosim.simulate(stop_time if stop_time is not None else duration, inputs,
                                 progress=progress)
         outputs = [c for c in result.columns if c.count(".") == 1 and c not in cosim.inputs
-                   and c.partition(".")[0] not in bridges]
+                   and c.partition(".")[0] not in bridges and c.rpartition(".")[2] in RECORDED]
         P_atm = next((float(p.value) for n, p in cosim.structure.parameters.items()
                       if n.endswith(".P_atm")), rig.P_atm)
     model_u = [n for n in u_names if n.partition(".")[0] not in bridges] or u_names
@@ -101,4 +101,7 @@ def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
         for name in ("p_a", "p_b", "alpha", "x"):
             out[f"{name}_measured"] = result[f"{bridge}.{name}"]
         out["u_applied"] = result[f"{bridge}.u_applied"]
+        for name in ("link_ok", "failsafe", "lost_packets"):
+            if f"{bridge}.{name}" in result:
+                out[name] = result[f"{bridge}.{name}"]
     return out

@@ -200,6 +200,14 @@ class CoSimulation:
                 (feed_edges if through else soft_edges)[a].add(b)
         self.step_order = _order(names, feed_edges, soft_edges, str(s.path))
         self._feed_components = [n for n in self.step_order if self._feed_out[n][0]]
+        # Integer and Boolean outputs (a bridge's link status) are recorded, not transferred
+        self._discrete_out = {}
+        for n in names:
+            md = self.instances[n].model_description
+            for typ in ("Integer", "Boolean"):
+                vs = [u.variable for u in md.outputs if u.variable.type == typ]
+                if vs:
+                    self._discrete_out[(n, typ)] = ([v.valueReference for v in vs], [v.name for v in vs])
 
     # -- running -------------------------------------------------------------------------
     def _set_inputs(self, name: str, values: list[float]) -> None:
@@ -275,6 +283,12 @@ class CoSimulation:
             rows[k, 0] = t
             for j, (i, f, o) in enumerate(record, start=1):
                 rows[k, j] = f * row_values[i] + o
+            j = len(record) + 1
+            for (n, typ), (vrs, _) in self._discrete_out.items():
+                fmu = self.instances[n].fmu
+                got = fmu.getInteger(vrs) if typ == "Integer" else fmu.getBoolean(vrs)
+                rows[k, j:j + len(vrs)] = got
+                j += len(vrs)
 
         take_inputs(t0)
         record_row(0, t0)
@@ -334,6 +348,7 @@ class CoSimulation:
             for o in self.outputs[n]:
                 columns.append(f"{n}.{o}")
                 record.append((self._slot[(n, o)], 1.0, 0.0))
+        columns.extend(f"{n}.{name}" for (n, _), (_, names) in self._discrete_out.items() for name in names)
         return columns, record
 
     def close(self) -> None:
