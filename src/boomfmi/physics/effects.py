@@ -1,0 +1,93 @@
+"""Candidate forms of the unmodelled effects (``shared/spec/effects.md``), for diagnosis.
+
+Each is the simplest physical form of its mechanism with one or two parameters, meant
+to be fitted to recordings and switched on as an option of the FMU it belongs to.
+They differ on purpose from the virtual rig's forms (``rig_truth``): a diagnosis that
+only recognised its own simulator would be worth nothing on a real machine.
+
+============================ ======== =========================================== ========
+effect (FMU)                 param    form                                        off at
+============================ ======== =========================================== ========
+valve_dynamics (valve)       tau      first-order lag of the spool:               tau = 0
+                                      dy/dt = (u - y) / tau
+valve_deadband (valve)       width    no opening for |u - 5| < width; linear      width = 0
+                                      beyond, full opening still at 0 and 10 V
+heat_transfer (cylinder)     tau      the pressure relaxes towards the isothermal tau = 0
+                                      pressure m R T_w / V with time constant tau
+piston_leakage (cylinder)    C        laminar leak A -> B: C (p_a - p_b)          C = 0
+stribeck_friction (boom)     v_s      Coulomb level F_d + (F_s - F_d) e^(-|v|/v_s) v_s = 0
+end_cushioning (boom)        l_c, b   a damping force -b v within l_c of the end  l_c = 0
+                                      the piston moves towards, growing linearly
+sensor_lag (bridge)          tau      first-order lag of every measured channel   tau = 0
+============================ ======== =========================================== ========
+"""
+from __future__ import annotations
+
+import math
+
+from .params import Load
+
+
+def spool_lag_step(y: float, u: float, dt: float, tau: float) -> float:
+    """The spool's position [V] after ``dt`` [s] of command ``u`` [V], first-order with
+    time constant ``tau`` [s] (exact for a held command); ``tau <= 0`` follows u."""
+    if tau <= 0.0:
+        return u
+    return u + (y - u) * math.exp(-dt / tau)
+
+
+def deadband_command(u: float, width: float, u_centre: float = 5.0, u_span: float = 5.0) -> float:
+    """The command the orifice sees with a dead band of half-width ``width`` [V] around
+    the centre: nothing opens within it, and beyond it the opening is linear again,
+    reaching full opening at the ends of the range."""
+    if width <= 0.0:
+        return u
+    d = u - u_centre
+    mag = max(abs(d) - width, 0.0) * u_span / (u_span - width)
+    return u_centre + math.copysign(mag, d)
+
+
+def thermal_relaxation_step(p: float, m: float, V: float, dt: float, tau: float,
+                            R: float, T_wall: float) -> float:
+    """The chamber pressure [Pa] after ``dt`` [s] of relaxation towards the isothermal
+    pressure ``m R T_wall / V`` of its air mass ``m`` [kg] in volume ``V`` [m^3], with
+    time constant ``tau`` [s]: the wall takes back the heat of compression (and gives
+    it to expanding air).  ``tau <= 0`` leaves p alone."""
+    if tau <= 0.0:
+        return p
+    p_iso = m * R * T_wall / V
+    return p_iso + (p - p_iso) * math.exp(-dt / tau)
+
+
+def leakage_flow(p_a: float, p_b: float, C: float) -> float:
+    """Laminar leakage across the piston seal [kg/s], from A to B (negative B to A):
+    ``C (p_a - p_b)`` with conductance ``C`` [kg/(s Pa)]."""
+    return C * (p_a - p_b)
+
+
+def stribeck_load(load: Load, v: float, v_s: float) -> Load:
+    """The load with its Coulomb level at speed ``v`` [m/s] on the Stribeck curve
+    ``F_d + (F_s - F_d) exp(-|v| / v_s)``; ``v_s <= 0`` leaves the paper's step."""
+    if v_s <= 0.0:
+        return load
+    return load._replace(F_d=load.F_d + (load.F_s - load.F_d) * math.exp(-abs(v) / v_s))
+
+
+def cushion_force(x: float, v: float, L: float, length: float, damping: float) -> float:
+    """End-of-stroke cushioning [N], positive extending: within ``length`` [m] of the
+    stop the piston moves towards, a damping force ``-damping v`` [N s/m] that grows
+    linearly from nothing at ``length`` to full at the stop."""
+    if length <= 0.0 or v == 0.0:
+        return 0.0
+    distance = (L - x) if v > 0.0 else x
+    if distance >= length:
+        return 0.0
+    return -damping * v * (1.0 - max(distance, 0.0) / length)
+
+
+def sensor_lag_step(measured: float, true: float, dt: float, tau: float) -> float:
+    """A sensor channel after ``dt`` [s]: first-order towards the true value with time
+    constant ``tau`` [s]; ``tau <= 0`` reads the true value."""
+    if tau <= 0.0:
+        return true
+    return true + (measured - true) * math.exp(-dt / tau)

@@ -1,0 +1,64 @@
+"""The candidate forms of the unmodelled effects (physics/effects.py) against closed forms."""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from boomfmi.physics import Load
+from boomfmi.physics import effects as fx
+
+
+def test_every_effect_is_off_at_its_off_value():
+    load = Load()
+    assert fx.spool_lag_step(3.0, 1.0, 1e-3, 0.0) == 1.0
+    assert fx.deadband_command(5.3, 0.0) == 5.3
+    assert fx.thermal_relaxation_step(4e5, 1e-4, 3e-5, 1e-3, 0.0, 287.0, 293.15) == 4e5
+    assert fx.leakage_flow(5e5, 2e5, 0.0) == 0.0
+    assert fx.stribeck_load(load, 0.01, 0.0) is load
+    assert fx.cushion_force(0.059, 0.05, 0.06, 0.0, 500.0) == 0.0
+    assert fx.sensor_lag_step(0.1, 0.2, 1e-3, 0.0) == 0.2
+
+
+def test_spool_lag_is_exact_first_order():
+    y, tau = 5.0, 0.004
+    for _ in range(10):
+        y = fx.spool_lag_step(y, 1.0, 1e-3, tau)
+    assert y == pytest.approx(1.0 + 4.0 * math.exp(-0.01 / tau), rel=1e-12)
+
+
+@pytest.mark.parametrize("u, expected", [(5.2, 5.0), (4.7, 5.0), (0.0, 0.0), (10.0, 10.0),
+                                         (2.65, 5.0 - 2.05 * 5.0 / 4.7)])
+def test_deadband_closes_the_centre_and_keeps_the_range(u, expected):
+    assert fx.deadband_command(u, 0.3) == pytest.approx(expected, rel=1e-12)
+
+
+def test_thermal_relaxation_heads_for_the_isothermal_pressure():
+    m, V, R, T = 2e-4, 4e-5, 287.0, 293.15
+    p_iso = m * R * T / V
+    p = fx.thermal_relaxation_step(1.2 * p_iso, m, V, 0.01, 0.01, R, T)
+    assert p == pytest.approx(p_iso * (1 + 0.2 * math.exp(-1)), rel=1e-12)
+
+
+def test_leak_runs_from_high_to_low():
+    assert fx.leakage_flow(5e5, 2e5, 1e-10) == pytest.approx(3e-5)
+    assert fx.leakage_flow(2e5, 5e5, 1e-10) == pytest.approx(-3e-5)
+
+
+def test_stribeck_falls_from_static_to_coulomb():
+    load = Load(F_s=120.0, F_d=80.0)
+    assert fx.stribeck_load(load, 0.0, 0.01).F_d == pytest.approx(120.0)
+    assert fx.stribeck_load(load, 0.01, 0.01).F_d == pytest.approx(80.0 + 40.0 / math.e)
+    assert fx.stribeck_load(load, 1.0, 0.01).F_d == pytest.approx(80.0, abs=1e-9)
+
+
+def test_cushion_brakes_only_near_the_end_it_approaches():
+    L, l_c, b = 0.06, 0.01, 800.0
+    assert fx.cushion_force(0.055, 0.05, L, l_c, b) == pytest.approx(-b * 0.05 * 0.5)
+    assert fx.cushion_force(0.055, -0.05, L, l_c, b) == 0.0            # moving away
+    assert fx.cushion_force(0.004, -0.05, L, l_c, b) == pytest.approx(b * 0.05 * 0.6)
+    assert fx.cushion_force(0.03, 0.05, L, l_c, b) == 0.0
+
+
+def test_sensor_lag_is_exact_first_order():
+    assert fx.sensor_lag_step(0.0, 1.0, 0.005, 0.005) == pytest.approx(1 - math.exp(-1), rel=1e-12)
