@@ -37,8 +37,9 @@ def main(argv=None) -> int:
             path = build_fmu(HERE / "fmus" / name, args.out / "fmus")
             print(f"built {path}")
             if args.write_references:
-                from boomfmi.fmubuild.references import write_references
-                print(f"wrote {write_references(HERE / 'fmus' / name, path)}")
+                from boomfmi.fmubuild.references import INPUTS, write_references
+                if name in INPUTS:      # the bridge's behaviour depends on its rig or recording
+                    print(f"wrote {write_references(HERE / 'fmus' / name, path)}")
         if set(args.names) == set(FMU_NAMES):
             from boomfmi.fmubuild.ssp import pack_ssp, write_reference_parameters
             if args.write_references:

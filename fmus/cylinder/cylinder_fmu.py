@@ -7,12 +7,18 @@ velocity; the energy balance of Eq. 4 is then integrated exactly, so the step is
 stable for any step size.  Where the valve also passes each flow's slope with respect
 to the chamber pressure, the chambers are integrated against that linearisation of the
 flow (an exponential integrator, stable however short the chamber's time constant).
+
+Unmodelled effects, off by default (``physics/effects.py``): ``C_leak`` > 0 adds a
+laminar leak across the piston seal (piston_leakage); ``tau_thermal`` > 0 lets each
+chamber's pressure relax towards the isothermal pressure of its air mass, which the
+FMU then tracks (heat_transfer).
 """
 from boomfmi_cylinder_lib.fmislave import BoomSlave, input, output, parameter
 from boomfmi_cylinder_lib.physics import (Cylinder as CylinderParams, Gas, ParameterError,
                                           chamber_pressure_step, chamber_volumes, check_cylinder,
                                           check_gas)
 from boomfmi_cylinder_lib.physics import reference_rig as rig
+from boomfmi_cylinder_lib.physics.effects import leakage_flow, thermal_relaxation_step
 
 
 class Cylinder(BoomSlave):
@@ -36,6 +42,8 @@ class Cylinder(BoomSlave):
         parameter("T", rig.T, "K", "air temperature", min=0.0),
         parameter("p_a0", rig.P_atm, "Pa", "initial absolute pressure in chamber A", min=0.0),
         parameter("p_b0", rig.P_atm, "Pa", "initial absolute pressure in chamber B", min=0.0),
+        parameter("C_leak", 0.0, "kg/(s.Pa)", "piston_leakage: laminar conductance of the piston seal, A to B; 0: off", min=0.0),
+        parameter("tau_thermal", 0.0, "s", "heat_transfer: time constant of the pressure's relaxation towards the isothermal; 0: off", min=0.0),
     )
 
     def __init__(self, **kwargs):
@@ -52,6 +60,9 @@ class Cylinder(BoomSlave):
             if not getattr(self, name) > 0.0:
                 raise ParameterError(name, getattr(self, name), "an absolute pressure must be > 0")
         self.p_a, self.p_b = self.p_a0, self.p_b0
+        V_a, V_b = chamber_volumes(min(max(self.x, 0.0), self.L), self._cyl)
+        RT = self.R * self.T
+        self._m_a, self._m_b = self.p_a * V_a / RT, self.p_b * V_b / RT    # air masses [kg]
 
     def step(self, t, dt):
         L = self._cyl.L
@@ -59,10 +70,17 @@ class Cylinder(BoomSlave):
         x_1 = min(max(x_0 + self.v * dt, 0.0), L)
         V_a0, V_b0 = chamber_volumes(x_0, self._cyl)
         V_a1, V_b1 = chamber_volumes(x_1, self._cyl)
-        p_a = chamber_pressure_step(self.p_a, V_a0, V_a1, self.mdot_a, dt, self._gas,
-                                    min(self.dmdot_a_dp_a, 0.0))
-        p_b = chamber_pressure_step(self.p_b, V_b0, V_b1, self.mdot_b, dt, self._gas,
-                                    min(self.dmdot_b_dp_b, 0.0))
+        q = leakage_flow(self.p_a, self.p_b, self.C_leak)      # held over the step
+        mdot_a, mdot_b = self.mdot_a - q, self.mdot_b + q
+        s_a = min(self.dmdot_a_dp_a, 0.0) - self.C_leak
+        s_b = min(self.dmdot_b_dp_b, 0.0) - self.C_leak
+        p_a = chamber_pressure_step(self.p_a, V_a0, V_a1, mdot_a, dt, self._gas, s_a)
+        p_b = chamber_pressure_step(self.p_b, V_b0, V_b1, mdot_b, dt, self._gas, s_b)
+        if self.tau_thermal > 0.0:
+            self._m_a += dt * (mdot_a + 0.5 * s_a * (p_a - self.p_a))
+            self._m_b += dt * (mdot_b + 0.5 * s_b * (p_b - self.p_b))
+            p_a = thermal_relaxation_step(p_a, self._m_a, V_a1, dt, self.tau_thermal, self.R, self.T)
+            p_b = thermal_relaxation_step(p_b, self._m_b, V_b1, dt, self.tau_thermal, self.R, self.T)
         if not (p_a > 0.0 and p_b > 0.0):
             raise ValueError(
                 f"a chamber emptied (p_a = {p_a:g} Pa, p_b = {p_b:g} Pa): the outflow "

@@ -19,6 +19,10 @@ Modes (parameter ``mode``):
   lockstep advances one sample per step; with a real-time rig the bridge paces itself
   to the wall clock.  A lost answer holds the last sample and clears link_ok; more than
   ``loss_budget`` consecutive losses is an fmi2Error.
+
+Unmodelled effect, off by default: ``tau_sensor`` > 0 passes p_a, p_b and alpha (and
+so x) through a first-order lag, the sensors and their conditioning (sensor_lag,
+``physics/effects.py``).
 """
 import bisect
 import time
@@ -28,6 +32,7 @@ from boomfmi_hardware_bridge_lib.link.client import RigClient, parse_address
 from boomfmi_hardware_bridge_lib.link.protocol import LinkError, load_key
 from boomfmi_hardware_bridge_lib.physics import Geometry, ParameterError, alpha_from_x, check_geometry, x_from_alpha
 from boomfmi_hardware_bridge_lib.physics import reference_rig as rig
+from boomfmi_hardware_bridge_lib.physics.effects import sensor_lag_step
 from boomfmi_hardware_bridge_lib.recording import RecordingError, parse_recording
 
 MEASURED = ("p_a", "p_b", "alpha", "f_ext")
@@ -70,6 +75,7 @@ class HardwareBridge(BoomSlave):
         parameter("h", rig.h, "m", "boom geometry h (Eq. 10)", min=0.0),
         parameter("l_min", rig.l_min, "m", "cylinder length at x = 0 (Eq. 11)", min=0.0),
         parameter("L", rig.L, "m", "stroke", min=0.0),
+        parameter("tau_sensor", 0.0, "s", "sensor_lag: time constant of a first-order lag on every measured channel; 0: off", min=0.0),
     )
 
     def __init__(self, **kwargs):
@@ -78,6 +84,7 @@ class HardwareBridge(BoomSlave):
         self._client = None
         self._geom = Geometry()
         self._losses = 0
+        self._t_meas = None
 
     # -- set-up ----------------------------------------------------------------------------
     def setup(self):
@@ -140,11 +147,11 @@ class HardwareBridge(BoomSlave):
             i, w = min(i, len(ts) - 1), 0.0
         else:
             w = (t - ts[i]) / (ts[i + 1] - ts[i])
-        for c in MEASURED:
-            col = self._cols[c]
-            setattr(self, c, col[i] if w == 0.0 else col[i] + w * (col[i + 1] - col[i]))
+        values = {c: (self._cols[c][i] if w == 0.0 else self._cols[c][i] + w * (self._cols[c][i + 1] - self._cols[c][i]))
+                  for c in MEASURED}
+        self._measured(values["p_a"], values["p_b"], values["alpha"], t)
+        self.f_ext = values["f_ext"]
         self.u_applied = self._cols["u"][i]
-        self.x = x_from_alpha(self.alpha, self._geom)
         self.t_rig = t
         if not inside and self.link_ok:
             self.log(f"replay: t = {t:g} s lies outside the recording ({ts[0]:g} to {ts[-1]:g} s); holding its end")
@@ -161,10 +168,21 @@ class HardwareBridge(BoomSlave):
                 return sample
         return None
 
+    def _measured(self, p_a, p_b, alpha, t):
+        """Set the measured outputs, through the sensor lag when it is on."""
+        tau = self.tau_sensor
+        if tau > 0.0 and self._t_meas is not None and t > self._t_meas:
+            dt = t - self._t_meas
+            p_a = sensor_lag_step(self.p_a, p_a, dt, tau)
+            p_b = sensor_lag_step(self.p_b, p_b, dt, tau)
+            alpha = sensor_lag_step(self.alpha, alpha, dt, tau)
+        self.p_a, self.p_b, self.alpha, self._t_meas = p_a, p_b, alpha, t
+        self.x = x_from_alpha(alpha, self._geom)
+
     def _show(self, s):
-        self.p_a, self.p_b, self.alpha, self.f_ext = s.p_a, s.p_b, s.alpha, s.f_ext
+        self._measured(s.p_a, s.p_b, s.alpha, s.t)
+        self.f_ext = s.f_ext
         self.u_applied, self.t_rig, self.failsafe = s.u_applied, s.t, s.failsafe
-        self.x = x_from_alpha(self.alpha, self._geom)
         self.link_ok = True
 
     def step(self, t, dt):

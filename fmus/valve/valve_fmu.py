@@ -5,12 +5,18 @@ chamber through the ports that the command opens (Eq. 1, standard form, and the
 reference rig's routing and A(u)), and each flow's slope with respect to its chamber's
 pressure, which lets the cylinder integrate its chambers against the valve's local
 linearisation (stable coupling at any communication step).  The outputs depend
-directly on the inputs; the FMU has no state.
+directly on the inputs.
+
+Unmodelled effects, off by default (``physics/effects.py``): ``tau_spool`` > 0 lets the
+spool follow the command with a first-order lag (valve_dynamics; the spool position is
+then the FMU's state), ``deadband`` > 0 closes a band of commands around 5 V
+(valve_deadband).
 """
 from boomfmi_valve_lib.fmislave import BoomSlave, input, output, parameter
 from boomfmi_valve_lib.physics import (Gas, Valve as ValveParams, chamber_flow_slopes, chamber_flows,
                                        check_gas, check_valve)
 from boomfmi_valve_lib.physics import reference_rig as rig
+from boomfmi_valve_lib.physics.effects import deadband_command, spool_lag_step
 
 
 class Valve(BoomSlave):
@@ -29,6 +35,8 @@ class Valve(BoomSlave):
         parameter("T", rig.T, "K", "air temperature", min=0.0),
         parameter("k", rig.k, "1", "ratio of specific heats of air", min=1.0),
         parameter("R", rig.R, "J/(kg.K)", "specific gas constant of air", min=0.0),
+        parameter("tau_spool", 0.0, "s", "valve_dynamics: time constant of the spool's first-order lag; 0: off", min=0.0),
+        parameter("deadband", 0.0, "V", "valve_deadband: half-width of the closed band around 5 V; 0: off", min=0.0, max=4.9),
     )
 
     def __init__(self, **kwargs):
@@ -37,23 +45,31 @@ class Valve(BoomSlave):
         self._valve, self._gas = ValveParams(), Gas()
         self._key = None
         self._flows = (0.0, 0.0, 0.0, 0.0)
+        self._spool = rig.u_centre
 
     def setup(self):
         self._valve = ValveParams(A_max=self.A_max, P_s=self.P_s, P_e=self.P_e)
         self._gas = Gas(k=self.k, R=self.R, T=self.T)
         check_valve(self._valve)
         check_gas(self._gas)
+        self._spool = self.u
         self._key = None
 
+    def _opening_command(self):
+        """The command the orifices see: the spool's lagged position, through the dead band."""
+        y = self._spool if self.tau_spool > 0.0 else self.u
+        return deadband_command(y, self.deadband) if self.deadband > 0.0 else y
+
     def _current_flows(self):
-        key = (self.u, self.p_a, self.p_b)
+        u = self._opening_command()
+        key = (u, self.p_a, self.p_b)
         if key != self._key:
             if not (self.p_a > 0.0 and self.p_b > 0.0):
                 self.fail(f"input pressures must be > 0 Pa absolute, got p_a = {self.p_a!r}, p_b = {self.p_b!r}")
                 self._flows = (0.0, 0.0, 0.0, 0.0)
             else:
-                self._flows = (*chamber_flows(self.u, self.p_a, self.p_b, self._valve, self._gas),
-                               *chamber_flow_slopes(self.u, self.p_a, self.p_b, self._valve, self._gas))
+                self._flows = (*chamber_flows(u, self.p_a, self.p_b, self._valve, self._gas),
+                               *chamber_flow_slopes(u, self.p_a, self.p_b, self._valve, self._gas))
             self._key = key
         return self._flows
 
@@ -74,4 +90,5 @@ class Valve(BoomSlave):
         return self._current_flows()[3]
 
     def step(self, t, dt):
-        pass  # no state: the flows follow the inputs at every communication point
+        if self.tau_spool > 0.0:
+            self._spool = spool_lag_step(self._spool, self.u, dt, self.tau_spool)

@@ -5,7 +5,7 @@ identification and diagnosis) uses these functions.  Only relative imports are u
 inside this package, so that ``build_fmus.py`` can bundle it into each FMU under a
 name of that FMU's own.
 """
-from . import reference_rig
+from . import effects, reference_rig
 from .chamber import chamber_inflows, chamber_pressure_step, chamber_volumes, pressure_rates
 from .force_estimation import pneumatic_stiffness, position_error_force, reflected_force
 from .geometry import alpha_from_x, check_geometry, cylinder_length, phi_from_x, x_from_alpha
@@ -19,7 +19,7 @@ from .validation import ParameterError
 from .valve import chamber_flow_slopes, chamber_flows, orifice_area
 
 __all__ = [
-    "reference_rig", "chamber_pressure_step", "chamber_volumes", "pressure_rates",
+    "effects", "reference_rig", "chamber_pressure_step", "chamber_volumes", "pressure_rates",
     "pneumatic_stiffness", "position_error_force", "reflected_force", "alpha_from_x",
     "check_geometry", "cylinder_length", "phi_from_x", "x_from_alpha", "acceleration",
     "advance_load", "drive_force", "friction_force", "piston_force", "slide_or_stick",

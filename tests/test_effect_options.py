@@ -1,0 +1,130 @@
+"""The unmodelled effects as options of their FMUs (off by default), through fmpy."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from boomfmi.physics import reference_rig as rig
+from boomfmi.recording import write_recording
+from boomfmi.system import FmuError, FmuInstance
+
+k, R, T = rig.k, rig.R, rig.T
+
+
+def choked(A, P_u=rig.P_s):
+    return A * P_u * math.sqrt(k / (R * T)) * (2 / (k + 1)) ** ((k + 1) / (2 * (k - 1)))
+
+
+def test_valve_dynamics_lags_the_opening(fmu):
+    tau, dt = 0.004, 0.004
+    with FmuInstance(fmu("valve")) as valve:
+        valve.initialize(dict(tau_spool=tau), inputs=dict(u=5.0, p_a=1.5e5, p_b=1.5e5))
+        valve.set(u=1.0)
+        assert valve.get("mdot_a")["mdot_a"] == 0.0              # the spool still sits at 5 V
+        valve.step_to(0.0, dt)
+        y = 1.0 + 4.0 * math.exp(-dt / tau)                      # first-order, one tau later
+        assert valve.get("mdot_a")["mdot_a"] == pytest.approx(choked(rig.A_max * (5 - y) / 5), rel=1e-9)
+
+
+def test_valve_deadband_closes_small_commands(fmu):
+    with FmuInstance(fmu("valve")) as valve:
+        valve.initialize(dict(deadband=0.3), inputs=dict(u=5.0, p_a=1.5e5, p_b=1.5e5))
+        valve.set(u=5.25)
+        assert valve.get("mdot_a", "mdot_b") == {"mdot_a": 0.0, "mdot_b": 0.0}
+        valve.set(u=1.0)
+        opening = (4.0 - 0.3) * 5.0 / 4.7 / 5.0
+        assert valve.get("mdot_a")["mdot_a"] == pytest.approx(choked(rig.A_max * opening), rel=1e-9)
+
+
+def test_piston_leakage_lets_the_chambers_creep_together_conserving_air(fmu):
+    x = 0.03
+    V_a, V_b = rig.A_a * x + rig.V_a0, rig.A_b * (rig.L - x) + rig.V_b0
+    with FmuInstance(fmu("cylinder")) as cyl:
+        cyl.initialize(dict(C_leak=2e-11, p_a0=5e5, p_b0=2e5), inputs=dict(x=x))
+        for i in range(200):
+            cyl.step_to(i * 5e-3, 5e-3)
+        p = cyl.get("p_a", "p_b")
+    assert 2e5 < p["p_b"] < p["p_a"] < 5e5
+    # each chamber isentropic, mass moved from A to B: dm = V dp / (k R T)
+    assert (5e5 - p["p_a"]) * V_a == pytest.approx((p["p_b"] - 2e5) * V_b, rel=2e-2)
+
+
+def test_heat_transfer_lets_a_filled_chamber_cool_down(fmu):
+    """Filled fast, the chamber's air is hot (isentropic compression): with the valve shut
+    the pressure falls towards the isothermal value of its air mass."""
+    x = 0.02
+    V = rig.A_a * x + rig.V_a0
+    mdot, t_fill = 2e-3, 0.02
+    final = {}
+    for tau in (0.0, 0.05):
+        with FmuInstance(fmu("cylinder")) as cyl:
+            cyl.initialize(dict(tau_thermal=tau), inputs=dict(x=x))
+            cyl.set(mdot_a=mdot)
+            for i in range(20):
+                cyl.step_to(i * 1e-3, 1e-3)
+            after_fill = cyl.get("p_a")["p_a"]
+            cyl.set(mdot_a=0.0)
+            for i in range(20, 520):
+                cyl.step_to(i * 1e-3, 1e-3)
+            final[tau] = (after_fill, cyl.get("p_a")["p_a"])
+    assert final[0.0][0] == final[0.0][1]                          # off: the pressure holds
+    m = rig.P_atm * V / (R * T) + mdot * t_fill
+    assert final[0.05][1] == pytest.approx(m * R * T / V, rel=1e-3)  # on: isothermal at the end
+    assert final[0.05][1] < final[0.05][0]
+
+
+def test_stribeck_friction_slows_the_breakaway(fmu):
+    x0 = 0.03
+    phi = math.pi - math.asin(rig.h / rig.a) - math.acos(
+        (rig.a**2 + (x0 + rig.l_min)**2 - rig.b**2) / (2 * rig.a * (x0 + rig.l_min)))
+    p_a = rig.P_atm + (rig.F_L * math.sin(phi) + 1.3 * rig.F_s * math.cos(phi)) / rig.A_a
+    v = {}
+    for v_s in (0.0, 0.02):
+        with FmuInstance(fmu("boom_load")) as boom:
+            boom.initialize(dict(x0=x0, v_s=v_s), inputs=dict(p_a=p_a))
+            boom.step_to(0.0, 0.01)
+            v[v_s] = boom.get("v")["v"]
+    assert 0.0 < v[0.02] < v[0.0]
+
+
+def test_end_cushioning_brakes_the_approach_to_the_stop(fmu):
+    speeds = {}
+    for l_c in (0.0, 0.01):
+        with FmuInstance(fmu("boom_load")) as boom:
+            boom.initialize(dict(x0=0.03, l_cushion=l_c, b_cushion=3000.0), inputs=dict(p_a=rig.P_s))
+            t = 0.0
+            while boom.get("x")["x"] < 0.057:
+                boom.step_to(t, 1e-3)
+                t += 1e-3
+            speeds[l_c] = boom.get("v")["v"]
+    assert 0.0 < speeds[0.01] < 0.8 * speeds[0.0]
+
+
+def test_sensor_lag_smooths_what_the_bridge_reports(fmu, tmp_path):
+    t = np.round(np.arange(0, 0.0505, 1e-3), 6)
+    alpha = np.where(t < 0.01, 0.7, 0.8)
+    path = write_recording(tmp_path / "step.csv", pd.DataFrame(
+        {"t": t, "u": 5.0, "p_a": 0.0, "p_b": 0.0, "alpha": alpha}))
+    with FmuInstance(fmu("hardware_bridge")) as b:
+        b.initialize(dict(mode="replay", recording=str(path), tau_sensor=0.005))
+        got = []
+        for k_ in range(len(t) - 1):
+            b.step_to(k_ * 1e-3, 1e-3)
+            got.append(b.get("alpha")["alpha"])
+    # one step after the jump at 10 ms: 0.7 + 0.1 (1 - e^(-1 ms / 5 ms))
+    assert got[9] == pytest.approx(0.7 + 0.1 * (1 - math.exp(-0.2)), rel=1e-12)
+    assert got[-1] == pytest.approx(0.8, abs=1e-4)
+
+
+@pytest.mark.parametrize("name, params, culprit", [
+    ("valve", {"deadband": 5.0}, "deadband"), ("valve", {"tau_spool": -1e-3}, "tau_spool"),
+    ("cylinder", {"C_leak": -1e-11}, "C_leak"), ("boom_load", {"v_s": -0.01}, "v_s"),
+    ("hardware_bridge", {"tau_sensor": -1.0}, "tau_sensor")])
+def test_bad_effect_parameters_are_fmi_errors(fmu, name, params, culprit):
+    with FmuInstance(fmu(name)) as inst:
+        with pytest.raises(FmuError) as err:
+            inst.initialize(params)
+    assert err.value.status == 3 and f"parameter {culprit} =" in str(err.value)
