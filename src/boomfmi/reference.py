@@ -10,7 +10,9 @@ tolerance.  Discontinuities are handled as events, never smoothed:
 * while it sticks (or rests against a stop), the drive force reaching the static
   friction level ``F_s cos(phi)`` (away from a stop) ends the segment.
 
-It is the yardstick for the co-simulation's error (``benchmarks/cosim_accuracy.py``).
+It is the yardstick for the co-simulation's error (``benchmarks/cosim_accuracy.py``),
+and, with the candidate forms of the unmodelled effects (``Model.effects``, forms in
+``physics/effects.py``, the same the FMUs' options use), the diagnosis's fast model.
 """
 from __future__ import annotations
 
@@ -24,6 +26,10 @@ from scipy.integrate import solve_ivp
 
 from . import physics as ph
 from .physics import reference_rig as rig
+from .physics.effects import cushion_force as fx_cushion
+from .physics.effects import deadband_command as fx_deadband
+from .physics.effects import sensor_lag_step as fx_sensor
+from .physics.effects import stribeck_load as fx_stribeck
 
 
 @dataclass
@@ -38,8 +44,20 @@ class Model:
     p_a0: float = rig.P_atm
     p_b0: float = rig.P_atm
     x0: float = 0.0
+    #: candidate effects switched on: name (effects.md) -> parameters, e.g.
+    #: ``{"valve_dynamics": {"tau": 0.004}, "piston_leakage": {"C": 2e-11}}``
+    effects: dict = field(default_factory=dict)
 
     def check(self) -> None:
+        for name, params in self.effects.items():
+            if name not in EFFECT_PARAMETERS:
+                raise ph.ParameterError("effects", name, f"not an effect of effects.md ({', '.join(EFFECT_PARAMETERS)})")
+            unknown = set(params) - set(EFFECT_PARAMETERS[name])
+            if unknown:
+                raise ph.ParameterError(f"effects.{name}", sorted(unknown), f"takes {EFFECT_PARAMETERS[name]}")
+            for k, v in params.items():
+                if not (v >= 0.0 and math.isfinite(v)):
+                    raise ph.ParameterError(f"effects.{name}.{k}", v, "must be a finite number >= 0")
         ph.check_valve(self.valve)
         ph.check_gas(self.gas)
         ph.check_cylinder(self.cylinder)
@@ -47,14 +65,21 @@ class Model:
         ph.check_geometry(self.geometry, self.cylinder.L)
 
 
+#: Each effect's parameters in ``Model.effects`` (the FMU options' names in brackets):
+#: valve_dynamics tau [s] (valve.tau_spool), valve_deadband width [V] (valve.deadband),
+#: heat_transfer tau [s] (cylinder.tau_thermal), piston_leakage C [kg/(s Pa)]
+#: (cylinder.C_leak), stribeck_friction v_s [m/s] (boom_load.v_s), end_cushioning
+#: length [m], damping [N s/m] (boom_load.l_cushion, b_cushion), sensor_lag tau [s]
+#: (hardware_bridge.tau_sensor).
+EFFECT_PARAMETERS = {"valve_dynamics": ("tau",), "valve_deadband": ("width",),
+                     "heat_transfer": ("tau",), "piston_leakage": ("C",),
+                     "stribeck_friction": ("v_s",), "end_cushioning": ("length", "damping"),
+                     "sensor_lag": ("tau",)}
+
+
 def _drive(model: Model, p_a, p_b, x, f_ext):
     return ph.drive_force(p_a, p_b, ph.phi_from_x(x, model.geometry), f_ext, model.cylinder,
                           model.load, model.P_atm)
-
-
-def _pressure_rates(model: Model, u, p_a, p_b, x, v):
-    mdot_a, mdot_b = ph.chamber_flows(u, p_a, p_b, model.valve, model.gas)
-    return ph.pressure_rates(p_a, p_b, mdot_a, mdot_b, x, v, model.cylinder, model.gas)
 
 
 def simulate_reference(model: Model, command: Callable[[float], dict], stop_time: float,
@@ -71,10 +96,56 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
         times = np.round(np.arange(0.0, stop_time + 1e-12, 1e-3), 12)
     times = np.asarray(times, dtype=float)
     L = model.cylinder.L
-    atol = np.array([1e-4, 1e-4, 1e-13, 1e-11])
+    fx = model.effects
+    tau_v = fx.get("valve_dynamics", {}).get("tau", 0.0)
+    width = fx.get("valve_deadband", {}).get("width", 0.0)
+    tau_th = fx.get("heat_transfer", {}).get("tau", 0.0)
+    C_leak = fx.get("piston_leakage", {}).get("C", 0.0)
+    v_s = fx.get("stribeck_friction", {}).get("v_s", 0.0)
+    l_c = fx.get("end_cushioning", {}).get("length", 0.0)
+    b_c = fx.get("end_cushioning", {}).get("damping", 0.0)
+    tau_s = fx.get("sensor_lag", {}).get("tau", 0.0)
+    k_, R_, T_ = model.gas
+    i_y = 4 if tau_v > 0 else None                      # the spool's position [V]
+    i_m = (4 + (i_y is not None)) if tau_th > 0 else None   # the chambers' air masses [kg]
+    n_state = 4 + (i_y is not None) + 2 * (i_m is not None)
+    atol = np.array([1e-4, 1e-4, 1e-13, 1e-11] + [1e-9] * (i_y is not None) + [1e-15, 1e-15] * (i_m is not None))
+
+    def pneumatics(u, y):
+        """The state's derivatives but x and v: dp_a, dp_b, then spool and masses."""
+        p_a, p_b, x, v = y[0], y[1], y[2], y[3]
+        cmd = y[i_y] if i_y is not None else u
+        if width > 0:
+            cmd = fx_deadband(cmd, width)
+        mdot_a, mdot_b = ph.chamber_flows(cmd, p_a, p_b, model.valve, model.gas)
+        if C_leak > 0:
+            q = C_leak * (p_a - p_b)
+            mdot_a, mdot_b = mdot_a - q, mdot_b + q
+        dp_a, dp_b = ph.pressure_rates(p_a, p_b, mdot_a, mdot_b, x, v, model.cylinder, model.gas)
+        extra = []
+        if i_y is not None:
+            extra.append((u - y[i_y]) / tau_v)
+        if i_m is not None:
+            V_a, V_b = ph.chamber_volumes(x, model.cylinder)
+            dp_a += (y[i_m] * R_ * T_ / V_a - p_a) / tau_th
+            dp_b += (y[i_m + 1] * R_ * T_ / V_b - p_b) / tau_th
+            extra += [mdot_a, mdot_b]
+        return dp_a, dp_b, extra
+
+    def slide_accel(y, F, phi, s):
+        load = model.load if v_s <= 0 else fx_stribeck(model.load, y[3], v_s)
+        if l_c > 0 and b_c > 0:
+            F += fx_cushion(y[2], y[3], L, l_c, b_c)
+        return ph.sliding_acceleration(y[3], F, phi, s, load)
 
     cuts = sorted({float(b) for b in breakpoints if 0.0 < b < stop_time} | {stop_time})
-    y = np.array([model.p_a0, model.p_b0, model.x0, 0.0])
+    y = np.zeros(n_state)
+    y[:4] = (model.p_a0, model.p_b0, model.x0, 0.0)
+    if i_y is not None:
+        y[i_y] = command(0.0).get("u", rig.u_centre)
+    if i_m is not None:
+        V_a, V_b = ph.chamber_volumes(model.x0, model.cylinder)
+        y[i_m], y[i_m + 1] = model.p_a0 * V_a / (R_ * T_), model.p_b0 * V_b / (R_ * T_)
     t = 0.0
     mode = 0          # +1 / -1 sliding, 0 stuck (or resting against a stop)
     out = np.full((len(times), 4), np.nan)
@@ -102,12 +173,12 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
             s = mode
 
             def rhs(_, y, s=s):
-                dp_a, dp_b = _pressure_rates(model, u, y[0], y[1], y[2], y[3])
+                dp_a, dp_b, extra = pneumatics(u, y)
                 if s == 0:
-                    return [dp_a, dp_b, 0.0, 0.0]
+                    return [dp_a, dp_b, 0.0, 0.0, *extra]
                 phi = ph.phi_from_x(y[2], model.geometry)
                 F = ph.drive_force(y[0], y[1], phi, f_ext, model.cylinder, model.load, model.P_atm)
-                return [dp_a, dp_b, y[3], ph.sliding_acceleration(y[3], F, phi, s, model.load)]
+                return [dp_a, dp_b, y[3], slide_accel(y, F, phi, s), *extra]
 
             # each event sits a hair past its threshold (1e-12 m/s, 1e-12 m, 1e-9 N), so a
             # segment that starts on a threshold does not trigger it again at once
@@ -138,7 +209,7 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
             t_new = float(sol.t[-1])
             sel = (times >= t - 1e-12) & (times <= t_new + 1e-12)
             if sel.any():
-                out[sel] = sol.sol(times[sel]).T
+                out[sel] = sol.sol(times[sel])[:4].T
                 inputs[sel] = (u, f_ext)
             y = sol.y[:, -1].copy()
             if sol.status == 1:          # an event ended the segment
@@ -157,4 +228,16 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
                        "p_a": out[:, 0], "p_b": out[:, 1], "x": np.clip(out[:, 2], 0.0, L),
                        "v": out[:, 3]})
     df["alpha"] = ph.alpha_from_x(df["x"].to_numpy(), model.geometry)
+    if tau_s > 0:                        # the measurement path: what the sensors report
+        for col in ("p_a", "p_b", "alpha", "x"):
+            df[col] = _first_order(df[col].to_numpy(), times, tau_s)
     return df
+
+
+def _first_order(y: np.ndarray, t: np.ndarray, tau: float) -> np.ndarray:
+    """A first-order lag (``physics.effects.sensor_lag_step``) run along a signal."""
+    out = np.empty_like(y)
+    out[0] = y[0]
+    for k in range(1, len(y)):
+        out[k] = fx_sensor(out[k - 1], y[k], t[k] - t[k - 1], tau)
+    return out
