@@ -5,6 +5,7 @@
     boomfmi rig serve --port P [--lockstep] [--record FILE] [--config rig.json] [--key-file K]
     boomfmi record --experiment paper_multistep --rig udp://127.0.0.1:P --out run.csv [--key-file K]
     boomfmi identify RUN.csv [RUN.csv ...] [--method paper|fit] [--a-max] [--holdout H.csv] --out params.json
+    boomfmi diagnose FIT.csv [FIT.csv ...] --holdout HOLD.csv [HOLD.csv ...] --out DIR
     boomfmi describe FMU [FMU ...]      the FMUs' interfaces as Markdown tables
     boomfmi check FMU_DIR               validate every FMU and replay its reference result
 """
@@ -103,6 +104,25 @@ def _identify(args) -> int:
     return 0
 
 
+def _diagnose(args) -> int:
+    from .diagnose import diagnose
+    doc = diagnose(args.recordings, args.holdout, args.out)
+    if not doc["judgeable"]:
+        print(f"cannot judge: {doc['reason']}")
+    else:
+        b = doc["baseline"]["nrmse_holdout"]
+        print("baseline holdout NRMSE: " + ", ".join(f"{k} {100 * v:.2f} %" for k, v in b.items()))
+        if doc["where"]:
+            w = doc["where"][0]
+            print(f"the gap lies mostly in {w['channel']} during {w['regime']} ({w['subsystem']}, "
+                  f"{100 * w['share']:.0f} % of it)")
+        for c in doc["effects"][:3]:
+            print(f"  {c['name']}: shrink {c['shrink']:.2f}, score {c['score']:.2f}")
+        print(f"verdict: {doc['verdict']}")
+    print(f"wrote {args.out}/diagnosis.json and {args.out}/report.html")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="boomfmi", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -152,6 +172,12 @@ def main(argv=None) -> int:
                    help="paper method: Eq. 13 as printed, or as derived from the force balances")
     p.add_argument("--out", type=Path, required=True, help="params.json (params.ssv and params.png go beside it)")
     p.set_defaults(run=_identify)
+    p = sub.add_parser("diagnose", help="where the model and the machine disagree, and which effect explains it")
+    p.add_argument("recordings", nargs="+", type=Path, help="FIT recordings: identify the baseline, fit the effects")
+    p.add_argument("--holdout", type=Path, nargs="+", required=True,
+                   help="HOLD recordings, never fitted on: every figure of shrink is measured on them")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.set_defaults(run=_diagnose)
     p = sub.add_parser("describe", help="print FMU interfaces as Markdown tables")
     p.add_argument("fmus", nargs="+", type=Path)
     p.set_defaults(run=_describe)

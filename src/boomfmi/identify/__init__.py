@@ -52,16 +52,17 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
     return result, recs, preps
 
 
-def model_for(values: dict):
-    """A ``reference.Model`` with the identified values in place of the reference rig's."""
+def model_for(values: dict, effects: dict | None = None):
+    """A ``reference.Model`` with the identified values in place of the reference rig's
+    (and candidate ``effects`` switched on)."""
     from ..reference import Model
     load = ph.Load(**{k: values[k] for k in ("K_v", "F_s", "F_d", "F_L", "M") if k in values
                       and math.isfinite(values[k])})
     valve = ph.Valve(A_max=values["A_max"]) if "A_max" in values else ph.Valve()
-    return Model(load=load, valve=valve)
+    return Model(load=load, valve=valve, effects=dict(effects or {}))
 
 
-def simulate_recording(values: dict, rec):
+def simulate_recording(values: dict, rec, effects: dict | None = None, rtol: float = 1e-9):
     """The model with ``values`` driven by a recording's command (its u held between
     samples), on the recording's times; pressures gauge like the recording."""
     from ..reference import simulate_reference
@@ -72,12 +73,13 @@ def simulate_recording(values: dict, rec):
     def command(s):
         i = max(0, int(np.searchsorted(t, s + 1e-9, side="right")) - 1)
         return {"u": float(u[i])}
-    model = model_for(values)
+    model = model_for(values, effects)
     x0 = float(np.clip(ph.x_from_alpha(float(rec.data["alpha"].iloc[0])), 0.0, model.cylinder.L))
     model.x0 = x0
     model.p_a0 = float(rec.data["p_a"].iloc[0]) + rec.P_atm
     model.p_b0 = float(rec.data["p_b"].iloc[0]) + rec.P_atm
-    sim = simulate_reference(model, command, float(t[-1]), times=t - t[0], breakpoints=changes - t[0])
+    sim = simulate_reference(model, command, float(t[-1]), times=t - t[0], breakpoints=changes - t[0],
+                             rtol=rtol)
     sim["p_a"] -= rec.P_atm
     sim["p_b"] -= rec.P_atm
     return sim

@@ -1,0 +1,165 @@
+"""Which unmodelled effect explains the gap, and by how much the model improves.
+
+For each candidate of ``effects.md`` (forms in ``physics/effects.py``): its few
+parameters are fitted on the fit recordings, with the baseline load parameters
+re-identified first (``identify.fit``), by output error of the whole model
+(``reference.simulate_reference`` with the effect on) on x, p_a and p_b, each residual
+normalised by its channel's range.  Each fitted candidate is then scored on the holdout
+recordings, which are never fitted on: ``shrink = 1 - (error after) / (error before)``,
+errors summed over the three channels.  The two best are also fitted together.
+
+Decisions carry margins against the recordings' own noise:
+
+* no gap: the baseline's holdout error is within ``NOISE_FACTOR`` times the noise
+  floor (each channel's noise over its range) plus ``ABS_FLOOR``: verdict ``[]``;
+* the best candidate shrinks the error by at least ``MIN_SHRINK``: it is the verdict,
+  joined by the second when the pair shrinks the error by ``PAIR_GAIN`` more than the
+  best alone and the second shrinks it by at least ``MIN_SHRINK_SECOND`` on its own;
+* otherwise ``["unexplained"]``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import minimize, minimize_scalar
+
+from ..identify import model_for, simulate_recording
+from ..identify.preprocess import lowpass
+
+CHANNELS = ("p_a", "p_b", "x")
+
+#: name -> [(parameter, lower, upper, log scale)]
+CANDIDATES = {
+    "valve_dynamics": [("tau", 2e-4, 0.05, True)],
+    "valve_deadband": [("width", 0.01, 1.5, False)],
+    "heat_transfer": [("tau", 0.01, 10.0, True)],
+    "piston_leakage": [("C", 1e-13, 5e-10, True)],
+    "stribeck_friction": [("v_s", 2e-4, 0.1, True)],
+    "end_cushioning": [("length", 1e-3, 0.02, False), ("damping", 10.0, 3e4, True)],
+    "sensor_lag": [("tau", 2e-4, 0.03, True)],
+}
+NOISE_FACTOR = 3.0
+ABS_FLOOR = 0.002
+MIN_SHRINK = 0.35
+MIN_SHRINK_SECOND = 0.2
+PAIR_GAIN = 0.1
+RTOL = 1e-6
+
+
+def measured(rec) -> dict:
+    from ..physics import x_from_alpha
+    return {"x": x_from_alpha(rec.data["alpha"].to_numpy(float)),
+            "p_a": rec.data["p_a"].to_numpy(float), "p_b": rec.data["p_b"].to_numpy(float)}
+
+
+def errors(values: dict, effects: dict, rec) -> dict:
+    """NRMSE per channel of the model (``values`` and ``effects``) on one recording."""
+    sim = simulate_recording(values, rec, effects=effects, rtol=RTOL)
+    m = measured(rec)
+    return {c: float(np.sqrt(np.mean((sim[c].to_numpy() - m[c]) ** 2)) / max(float(np.ptp(m[c])), 1e-12))
+            for c in CHANNELS}
+
+
+def mean_errors(values, effects, recs) -> dict:
+    per = [errors(values, effects, r) for r in recs]
+    return {c: float(np.mean([e[c] for e in per])) for c in CHANNELS}
+
+
+def noise_floor(rec) -> dict:
+    """Each channel's measurement noise over its range: the RMS of what a 50 Hz
+    low-pass removes."""
+    m = measured(rec)
+    fs = 1.0 / float(np.median(np.diff(rec.data["t"].to_numpy(float))))
+    return {c: float(np.std(m[c] - lowpass(m[c], fs, 50.0)) / max(float(np.ptp(m[c])), 1e-12)) for c in CHANNELS}
+
+
+@dataclass
+class Candidate:
+    name: str
+    params: dict
+    fit_error: float
+    holdout: dict = field(default_factory=dict)
+    shrink: float = 0.0
+    score: float = 0.0
+
+
+def _unpack(spec, z):
+    return {p: (10 ** v if log else v) for (p, lo, hi, log), v in zip(spec, z)}
+
+
+def fit_effects(names: list[str], values: dict, fit_recs) -> tuple[dict, float]:
+    """Fit the parameters of the effects ``names`` together on the fit recordings:
+    ``({name: {param: value}}, cost)``."""
+    spec = [(n, *s) for n in names for s in CANDIDATES[n]]
+
+    def to_effects(z):
+        out: dict = {}
+        for (n, p, lo, hi, log), v in zip(spec, z):
+            out.setdefault(n, {})[p] = 10 ** v if log else v
+        return out
+
+    def cost(z):
+        e = mean_errors(values, to_effects(z), fit_recs)
+        return sum(v * v for v in e.values())
+
+    bounds = [(math.log10(lo), math.log10(hi)) if log else (lo, hi) for _, _, lo, hi, log in spec]
+    if len(spec) == 1:
+        res = minimize_scalar(lambda v: cost([v]), bounds=bounds[0], method="bounded",
+                              options={"xatol": 0.02 * (bounds[0][1] - bounds[0][0])})
+        z, fun = [res.x], res.fun
+    else:
+        z0 = [0.5 * (lo + hi) for lo, hi in bounds]
+        res = minimize(cost, z0, method="Nelder-Mead", bounds=bounds,
+                       options={"maxfev": 60, "xatol": 1e-3, "fatol": 1e-9})
+        z, fun = res.x, res.fun
+    return to_effects(z), float(fun)
+
+
+@dataclass
+class Attribution:
+    baseline_holdout: dict
+    noise: dict
+    gap: bool
+    candidates: list
+    verdict: list
+
+
+def attribute(values: dict, fit_recs, hold_recs, names=None) -> Attribution:
+    """Fit, score and rank the candidates; decide the verdict."""
+    names = list(CANDIDATES) if names is None else names
+    before = mean_errors(values, {}, hold_recs)
+    floors = [noise_floor(r) for r in hold_recs]
+    noise = {c: float(np.mean([f[c] for f in floors])) for c in CHANNELS}
+    total_before = sum(before.values())
+    gap = total_before > NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR
+    cands = []
+    for n in names:
+        fx, cost = fit_effects([n], values, fit_recs)
+        after = mean_errors(values, fx, hold_recs)
+        c = Candidate(n, fx[n], cost, after, 1.0 - sum(after.values()) / max(total_before, 1e-12))
+        cands.append(c)
+    cands.sort(key=lambda c: -c.shrink)
+    weights = [max(c.shrink, 0.0) ** 2 for c in cands]
+    total_w = sum(weights) or 1.0
+    best_strength = min(1.0, max(cands[0].shrink, 0.0) / MIN_SHRINK) if cands else 0.0
+    for c, w in zip(cands, weights):
+        c.score = round(best_strength * w / total_w, 4)
+    verdict: list = []
+    if gap and cands:
+        best = cands[0]
+        if best.shrink >= MIN_SHRINK:
+            verdict = [best.name]
+            if len(cands) > 1 and cands[1].shrink >= MIN_SHRINK_SECOND:
+                pair = [best.name, cands[1].name]
+                fx, cost = fit_effects(pair, values, fit_recs)
+                after = mean_errors(values, fx, hold_recs)
+                shrink = 1.0 - sum(after.values()) / max(total_before, 1e-12)
+                if shrink >= best.shrink + PAIR_GAIN:
+                    verdict = pair
+                    cands.insert(0, Candidate("+".join(pair), fx, cost, after, shrink,
+                                              round(best_strength, 4)))
+        else:
+            verdict = ["unexplained"]
+    return Attribution(before, noise, gap, cands, verdict)

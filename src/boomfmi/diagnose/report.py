@@ -1,0 +1,168 @@
+"""``boomfmi diagnose``: the gap's place and cause, as ``diagnosis.json`` and a report.
+
+Follows ``shared/spec/diagnosis-report.md``: FIT recordings identify the baseline and
+fit each candidate effect; HOLD recordings are never fitted on and every figure of
+shrink is measured on them.  Writes ``diagnosis.json``, ``report.html`` (readable on its
+own: the verdict first, then before/after overlays per channel, the residual by regime
+and subsystem, the candidate table) and the PNGs it shows.
+"""
+from __future__ import annotations
+
+import html
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .. import physics as ph
+from ..identify import identify_recordings, simulate_recording
+from ..recording import read_recording
+from .attribute import CHANNELS, attribute, measured
+from .localise import localise
+
+MIN_TRAVEL = 1e-3     #: [m] a recording whose piston moves less than this cannot be judged
+
+
+def _plain(obj):
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, (np.floating, np.integer)):
+        return obj.item()
+    return obj
+
+
+def diagnose(fit_paths, hold_paths, out_dir) -> dict:
+    """Run the diagnosis and write its outputs into ``out_dir``; return the JSON document."""
+    if not hold_paths:
+        raise ValueError("diagnose needs at least one holdout recording (--holdout): shrink is measured there")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    fit_recs = [read_recording(p) for p in fit_paths]
+    hold_recs = [read_recording(p) for p in hold_paths]
+    rigs = {json.dumps(r.rig, sort_keys=True) for r in fit_recs + hold_recs}
+    if len(rigs) > 1:
+        raise ValueError("the recordings come from different rigs (their sidecars' 'rig' values differ): "
+                         + ", ".join(str(r.path) for r in fit_recs + hold_recs))
+    still = [str(r.path) for r in fit_recs + hold_recs if float(np.ptp(measured(r)["x"])) < MIN_TRAVEL]
+    if still:
+        doc = {"judgeable": False,
+               "reason": f"no motion in {', '.join(still)}: the piston moves less than "
+                         f"{MIN_TRAVEL * 1e3:g} mm, so neither the load nor any effect can be judged",
+               "baseline": None, "where": [], "effects": [], "verdict": []}
+        _write(out, doc, None, None, None)
+        return doc
+
+    result, _, _ = identify_recordings(fit_paths, "fit")
+    values = result.values()
+    att = attribute(values, fit_recs, hold_recs)
+    hold = hold_recs[0]
+    from ..identify.preprocess import prepare
+    prep = prepare(hold)
+    base_sim = simulate_recording(values, hold)
+    abs_sim = base_sim.copy()
+    abs_sim["p_a"] += hold.P_atm
+    abs_sim["p_b"] += hold.P_atm
+    load = ph.Load(**{k: values[k] for k in ("K_v", "F_s", "F_d", "F_L", "M")})
+    loc = localise(prep, abs_sim, load) if att.gap else None
+    effects = [{"name": c.name, "params": c.params if "+" not in c.name else c.params,
+                "nrmse_holdout_after": {k: round(v, 6) for k, v in c.holdout.items()},
+                "shrink": round(c.shrink, 4), "score": c.score} for c in att.candidates]
+    doc = {"judgeable": True,
+           "baseline": {"params": {k: round(v, 6) for k, v in values.items()},
+                        "nrmse_holdout": {k: round(v, 6) for k, v in att.baseline_holdout.items()},
+                        "warnings": result.warnings},
+           "noise_floor": {k: round(v, 6) for k, v in att.noise.items()},
+           "gap_beyond_noise": att.gap,
+           "where": loc.where if loc else [],
+           "effects": effects,
+           "verdict": att.verdict}
+    after_sim = None
+    if att.verdict and att.verdict != ["unexplained"]:
+        best = att.candidates[0]
+        fx = best.params if "+" in best.name else {best.name: best.params}
+        after_sim = simulate_recording(values, hold, effects=fx)
+    _write(out, doc, hold, base_sim, after_sim, loc)
+    return doc
+
+
+def _write(out: Path, doc: dict, hold, base_sim, after_sim, loc=None) -> None:
+    (out / "diagnosis.json").write_text(json.dumps(_plain(doc), indent=2))
+    images = []
+    if hold is not None:
+        images = _plots(out, hold, base_sim, after_sim, loc, doc)
+    (out / "report.html").write_text(_html(doc, images))
+
+
+def _plots(out: Path, hold, base_sim, after_sim, loc, doc) -> list[str]:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    t = hold.data["t"].to_numpy()
+    m = measured(hold)
+    names = []
+    scale = {"x": (1e3, "x [mm]"), "p_a": (1e-5, "p_a [bar gauge]"), "p_b": (1e-5, "p_b [bar gauge]")}
+    for c in CHANNELS:
+        f, label = scale[c]
+        fig, ax = plt.subplots(figsize=(9, 3))
+        ax.plot(t, f * m[c], lw=0.8, color="k", label="holdout recording")
+        ax.plot(t, f * base_sim[c], lw=1.0, label="baseline model")
+        if after_sim is not None:
+            ax.plot(t, f * after_sim[c], lw=1.0, label="with " + " + ".join(doc["verdict"]))
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel(label)
+        ax.legend(loc="best", fontsize=8)
+        fig.tight_layout()
+        name = f"overlay_{c}.png"
+        fig.savefig(out / name, dpi=100)
+        plt.close(fig)
+        names.append(name)
+    if loc is not None:
+        fig, axes = plt.subplots(1, 2, figsize=(9, 3))
+        for ax, (title, shares) in zip(axes, (("by regime", loc.regime_share), ("by subsystem", loc.subsystem_share))):
+            ax.bar(list(shares), list(shares.values()))
+            ax.set_title(f"share of the residual {title}")
+            ax.tick_params(axis="x", rotation=30)
+        fig.tight_layout()
+        fig.savefig(out / "residual_breakdown.png", dpi=100)
+        plt.close(fig)
+        names.append("residual_breakdown.png")
+    return names
+
+
+def _html(doc: dict, images: list[str]) -> str:
+    e = html.escape
+    verdict = doc["verdict"]
+    if not doc.get("judgeable", True):
+        headline = f"Cannot be judged: {e(doc['reason'])}"
+    elif verdict == []:
+        headline = "No gap beyond the recordings' noise: the baseline model explains them."
+    elif verdict == ["unexplained"]:
+        headline = "A gap that no candidate effect explains (see where it lies below)."
+    else:
+        headline = "The gap is explained by: " + ", ".join(f"<b>{e(v)}</b>" for v in verdict)
+    rows = "".join(
+        f"<tr><td>{e(c['name'])}</td><td>{e(json.dumps(_plain(c['params'])))}</td>"
+        f"<td>{c['shrink']:.3f}</td><td>{c['score']:.3f}</td>"
+        f"<td>{' / '.join(f'{100 * v:.3f} %' for v in c['nrmse_holdout_after'].values())}</td></tr>"
+        for c in doc.get("effects", []))
+    where = "".join(
+        f"<tr><td>{e(w['channel'])}</td><td>{e(w['regime'])}</td><td>{e(w['subsystem'])}</td>"
+        f"<td>{w['share']:.3f}</td><td>{e(str(w['windows']))}</td></tr>" for w in doc.get("where", []))
+    base = doc.get("baseline") or {}
+    params = ", ".join(f"{k} = {v:.4g}" for k, v in (base.get("params") or {}).items())
+    before = " / ".join(f"{100 * v:.3f} %" for v in (base.get("nrmse_holdout") or {}).values())
+    imgs = "".join(f'<p><img src="{e(n)}" alt="{e(n)}" style="max-width:100%"></p>' for n in images)
+    return f"""<!doctype html><html><head><meta charset="utf-8"><title>boomfmi diagnosis</title>
+<style>body{{font-family:sans-serif;max-width:980px;margin:2em auto}}table{{border-collapse:collapse}}
+td,th{{border:1px solid #ccc;padding:4px 8px;font-size:13px}}</style></head><body>
+<h1>Diagnosis of the sim-to-real gap</h1>
+<p style="font-size:1.3em">{headline}</p>
+<h2>Baseline</h2><p>Re-identified on the fit recordings: {e(params)}.<br>
+Holdout NRMSE p_a / p_b / x: {before}.</p>
+<h2>Before and after, on the holdout recording</h2>{imgs}
+<h2>Where the gap lies</h2><table><tr><th>channel</th><th>regime</th><th>subsystem</th><th>share</th><th>windows [s]</th></tr>{where}</table>
+<h2>Candidate effects, best first</h2><table><tr><th>effect</th><th>fitted parameters</th><th>shrink</th><th>score</th>
+<th>holdout NRMSE after (p_a / p_b / x)</th></tr>{rows}</table>
+</body></html>"""

@@ -1,0 +1,80 @@
+"""boomfmi diagnose: the report's contract (diagnosis-report.md) and its bad input."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pandas as pd
+import pytest
+
+from boomfmi.experiments import random_steps
+from boomfmi.recording import read_recording, write_recording
+from boomfmi.rig.offline import run_offline
+
+
+@pytest.fixture(scope="module")
+def leaky(tmp_path_factory):
+    d = tmp_path_factory.mktemp("diag")
+    cfg = {"seed": 5, "effects": {"piston_leakage": {}}}
+    fit, hold = random_steps(3, duration=7.0), random_steps(4, duration=7.0)
+    write_recording(d / "fit.csv", run_offline(cfg, fit, fit.duration))
+    write_recording(d / "hold.csv", run_offline(dict(cfg, seed=6), hold, hold.duration))
+    return d
+
+
+def run(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "boomfmi.cli", "diagnose", *map(str, args)],
+                          cwd=cwd, capture_output=True, text=True, timeout=600)
+
+
+def test_a_leaking_piston_is_found_and_the_report_follows_the_spec(leaky):
+    out = leaky / "out"
+    proc = run(leaky / "fit.csv", "--holdout", leaky / "hold.csv", "--out", out, cwd=leaky)
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads((out / "diagnosis.json").read_text())
+    assert set(doc["baseline"]["params"]) == {"K_v", "F_s", "F_d", "F_L", "M"}
+    assert set(doc["baseline"]["nrmse_holdout"]) == {"p_a", "p_b", "x"}
+    assert doc["verdict"] == ["piston_leakage"]
+    best = doc["effects"][0]
+    assert best["name"] == "piston_leakage" and best["shrink"] > 0.6 and 0 < best["score"] <= 1
+    assert {e["name"] for e in doc["effects"]} >= {"valve_dynamics", "heat_transfer", "sensor_lag"}
+    assert doc["where"] and doc["where"][0]["subsystem"] == "cylinder"
+    assert all({"channel", "regime", "subsystem", "share", "windows"} <= set(w) for w in doc["where"])
+    html = (out / "report.html").read_text()
+    assert html.index("piston_leakage") < html.index("<h2>Baseline")     # the verdict comes first
+    for png in ("overlay_x.png", "overlay_p_a.png", "overlay_p_b.png", "residual_breakdown.png"):
+        assert (out / png).stat().st_size > 5000 and png in html
+    assert "verdict: ['piston_leakage']" in proc.stdout
+
+
+def test_no_holdout_is_refused(leaky):
+    proc = run(leaky / "fit.csv", "--out", leaky / "o", cwd=leaky)
+    assert proc.returncode == 2 and "--holdout" in proc.stderr
+
+
+def test_unreadable_recordings_are_named(leaky, tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t;u;p_a;p_b;alpha\n0;5;0;0;0.6\n")
+    proc = run(bad, "--holdout", leaky / "hold.csv", "--out", tmp_path / "o", cwd=tmp_path)
+    assert proc.returncode == 1 and "bad.csv, line 1" in proc.stderr and "Traceback" not in proc.stderr
+    proc = run(tmp_path / "missing.csv", "--holdout", leaky / "hold.csv", "--out", tmp_path / "o", cwd=tmp_path)
+    assert proc.returncode == 1 and "missing.csv: no such file" in proc.stderr
+
+
+def test_recordings_from_different_rigs_are_refused(leaky, tmp_path):
+    other = tmp_path / "other.csv"
+    write_recording(other, read_recording(leaky / "hold.csv").data, sidecar={"rig": {"M": 30.0}})
+    proc = run(leaky / "fit.csv", "--holdout", other, "--out", tmp_path / "o", cwd=tmp_path)
+    assert proc.returncode == 1 and "different rigs" in proc.stderr
+
+
+def test_a_recording_without_motion_gets_a_report_not_a_crash(tmp_path):
+    t = [round(k * 1e-3, 6) for k in range(2000)]
+    still = pd.DataFrame({"t": t, "u": 5.0, "p_a": 0.0, "p_b": 0.0, "alpha": 0.6342})
+    write_recording(tmp_path / "still.csv", still)
+    proc = run(tmp_path / "still.csv", "--holdout", tmp_path / "still.csv", "--out", tmp_path / "o", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads((tmp_path / "o" / "diagnosis.json").read_text())
+    assert doc["judgeable"] is False and "no motion" in doc["reason"] and doc["verdict"] == []
+    assert "Cannot be judged" in (tmp_path / "o" / "report.html").read_text()
