@@ -156,11 +156,18 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
         return F, model.load.F_s * math.cos(ph.phi_from_x(y[2], model.geometry))
 
     def next_mode(cmd, y):
+        """Eq. 9's test at rest, as ``physics.load.slide_or_stick`` applies it: the piston
+        breaks away when the drive exceeds the static level, and only if the Coulomb
+        friction then leaves a net force in that direction (F_s below F_d would
+        otherwise stop it at once, forever)."""
         F, limit = forces(cmd, y)
         if abs(F) <= limit:
             return 0
         s = 1 if F > 0 else -1
         if (s > 0 and y[2] >= L) or (s < 0 and y[2] <= 0.0):
+            return 0
+        c = math.cos(ph.phi_from_x(y[2], model.geometry))
+        if s * (F - s * model.load.F_d * c) <= 0.0:
             return 0
         return s
 
@@ -219,8 +226,8 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
                     mode = next_mode(cmd, y)
                 else:
                     mode = next_mode(cmd, y)
-                    if mode == 0:        # grazing: nudge past the event
-                        mode = 1 if forces(cmd, y)[0] > 0 else -1
+                    if mode == 0 and abs(forces(cmd, y)[0]) <= forces(cmd, y)[1] + 1e-6:
+                        mode = 1 if forces(cmd, y)[0] > 0 else -1     # grazing: nudge past the event
             if s == 0:
                 out[sel, 3] = 0.0
             t = t_new

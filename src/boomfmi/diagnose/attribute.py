@@ -45,7 +45,8 @@ ABS_FLOOR = 0.002
 MIN_SHRINK = 0.35
 MIN_SHRINK_SECOND = 0.2
 PAIR_GAIN = 0.1
-RTOL = 1e-6
+RTOL = 1e-6            #: the reference solver's tolerance when scoring
+FIT_RTOL = 1e-5        #: and while fitting (each fit runs the model a dozen times or more)
 
 
 def measured(rec) -> dict:
@@ -54,16 +55,36 @@ def measured(rec) -> dict:
             "p_a": rec.data["p_a"].to_numpy(float), "p_b": rec.data["p_b"].to_numpy(float)}
 
 
-def errors(values: dict, effects: dict, rec) -> dict:
-    """NRMSE per channel of the model (``values`` and ``effects``) on one recording."""
-    sim = simulate_recording(values, rec, effects=effects, rtol=RTOL)
+def errors(values: dict, effects: dict, rec, rtol: float = RTOL) -> dict:
+    """NRMSE per channel of the model (``values`` and ``effects``) on one recording.
+
+    The sensor lag acts on the measured channels only, after the physics: with it
+    alone, the model runs once (cached) and only the filter varies."""
+    only_lag = set(effects) == {"sensor_lag"}
+    sim = _baseline(values, rec, rtol) if only_lag else simulate_recording(values, rec, effects=effects, rtol=rtol)
+    if only_lag:
+        from ..reference import _first_order
+        t = sim["time"].to_numpy()
+        sim = {c: _first_order(sim[c].to_numpy(), t, effects["sensor_lag"]["tau"]) for c in CHANNELS}
     m = measured(rec)
-    return {c: float(np.sqrt(np.mean((sim[c].to_numpy() - m[c]) ** 2)) / max(float(np.ptp(m[c])), 1e-12))
+    return {c: float(np.sqrt(np.mean((np.asarray(sim[c]) - m[c]) ** 2)) / max(float(np.ptp(m[c])), 1e-12))
             for c in CHANNELS}
 
 
-def mean_errors(values, effects, recs) -> dict:
-    per = [errors(values, effects, r) for r in recs]
+_cache: dict = {}
+
+
+def _baseline(values: dict, rec, rtol: float):
+    key = (id(rec), tuple(sorted(values.items())), rtol)
+    if key not in _cache:
+        if len(_cache) > 32:
+            _cache.clear()
+        _cache[key] = simulate_recording(values, rec, rtol=rtol)
+    return _cache[key]
+
+
+def mean_errors(values, effects, recs, rtol: float = RTOL) -> dict:
+    per = [errors(values, effects, r, rtol) for r in recs]
     return {c: float(np.mean([e[c] for e in per])) for c in CHANNELS}
 
 
@@ -101,7 +122,7 @@ def fit_effects(names: list[str], values: dict, fit_recs) -> tuple[dict, float]:
         return out
 
     def cost(z):
-        e = mean_errors(values, to_effects(z), fit_recs)
+        e = mean_errors(values, to_effects(z), fit_recs, FIT_RTOL)
         return sum(v * v for v in e.values())
 
     bounds = [(math.log10(lo), math.log10(hi)) if log else (lo, hi) for _, _, lo, hi, log in spec]
@@ -126,20 +147,32 @@ class Attribution:
     verdict: list
 
 
-def attribute(values: dict, fit_recs, hold_recs, names=None) -> Attribution:
-    """Fit, score and rank the candidates; decide the verdict."""
+def _fit_and_score(args):
+    name, values, fit_recs, hold_recs = args
+    fx, cost = fit_effects([name], values, fit_recs)
+    return name, fx, cost, mean_errors(values, fx, hold_recs)
+
+
+def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None = None) -> Attribution:
+    """Fit, score and rank the candidates (``workers`` processes at once; default: one
+    per core); decide the verdict."""
+    import os
     names = list(CANDIDATES) if names is None else names
     before = mean_errors(values, {}, hold_recs)
     floors = [noise_floor(r) for r in hold_recs]
     noise = {c: float(np.mean([f[c] for f in floors])) for c in CHANNELS}
     total_before = sum(before.values())
     gap = total_before > NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR
-    cands = []
-    for n in names:
-        fx, cost = fit_effects([n], values, fit_recs)
-        after = mean_errors(values, fx, hold_recs)
-        c = Candidate(n, fx[n], cost, after, 1.0 - sum(after.values()) / max(total_before, 1e-12))
-        cands.append(c)
+    jobs = [(n, values, fit_recs, hold_recs) for n in names]
+    workers = workers or os.cpu_count() or 1
+    if workers > 1:
+        from concurrent.futures import ProcessPoolExecutor
+        with ProcessPoolExecutor(min(workers, len(jobs))) as pool:
+            fitted = list(pool.map(_fit_and_score, jobs))
+    else:
+        fitted = [_fit_and_score(j) for j in jobs]
+    cands = [Candidate(n, fx[n], cost, after, 1.0 - sum(after.values()) / max(total_before, 1e-12))
+             for n, fx, cost, after in fitted]
     cands.sort(key=lambda c: -c.shrink)
     weights = [max(c.shrink, 0.0) ** 2 for c in cands]
     total_w = sum(weights) or 1.0

@@ -33,8 +33,9 @@ def _plain(obj):
     return obj
 
 
-def diagnose(fit_paths, hold_paths, out_dir) -> dict:
-    """Run the diagnosis and write its outputs into ``out_dir``; return the JSON document."""
+def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None) -> dict:
+    """Run the diagnosis and write its outputs into ``out_dir``; return the JSON document.
+    ``workers``: processes for the candidates' fits (default: one per core)."""
     if not hold_paths:
         raise ValueError("diagnose needs at least one holdout recording (--holdout): shrink is measured there")
     out = Path(out_dir)
@@ -56,7 +57,7 @@ def diagnose(fit_paths, hold_paths, out_dir) -> dict:
 
     result, _, _ = identify_recordings(fit_paths, "fit")
     values = result.values()
-    att = attribute(values, fit_recs, hold_recs)
+    att = attribute(values, fit_recs, hold_recs, workers=workers)
     hold = hold_recs[0]
     from ..identify.preprocess import prepare
     prep = prepare(hold)

@@ -233,7 +233,9 @@ def fit_static_friction(preps, base: dict, cyl, geom, P_atm, L):
         return sum(float(np.sum(((simulate_load(p, load, cyl, geom, P_atm, i0, i1, x0) - p.x_raw[i0:i1])[moved]) ** 2))
                    for p, i0, i1, x0, moved in wins)
 
-    lo, hi = 0.0, 3.0 * max(base["F_d"], 50.0)
+    # F_s is not below F_d: a piston that broke away below the Coulomb level would stop
+    # again at once (Eq. 9), so such an F_s could never be seen
+    lo, hi = max(base["F_d"], 0.0), 3.0 * max(base["F_d"], 50.0)
     res = minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": 0.01})
     F_s = float(res.x)
     # interval: curvature of the cost with the residual variance and correlation
