@@ -236,7 +236,16 @@ def fit_static_friction(preps, base: dict, cyl, geom, P_atm, L):
     # F_s is not below F_d: a piston that broke away below the Coulomb level would stop
     # again at once (Eq. 9), so such an F_s could never be seen
     lo, hi = max(base["F_d"], 0.0), 3.0 * max(base["F_d"], 50.0)
-    res = minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": 0.01})
+    # the cost is rough (starts happen on a time grid), so scan first, then refine
+    # around the best point of the scan
+    grid = np.linspace(lo, hi, 41)
+    costs = [cost(g) for g in grid]
+    j = int(np.argmin(costs))
+    step = grid[1] - grid[0]
+    res = minimize_scalar(cost, bounds=(max(lo, grid[j] - step), min(hi, grid[j] + step)),
+                          method="bounded", options={"xatol": 0.01})
+    if res.fun > costs[j]:
+        res.x, res.fun = grid[j], costs[j]
     F_s = float(res.x)
     # interval: curvature of the cost with the residual variance and correlation
     h = max(0.5, 0.01 * F_s)
