@@ -9,16 +9,20 @@ to the chamber pressure, the chambers are integrated against that linearisation 
 flow (an exponential integrator, stable however short the chamber's time constant).
 
 Unmodelled effects, off by default (``physics/effects.py``): ``C_leak`` > 0 adds a
-laminar leak across the piston seal (piston_leakage); ``tau_thermal`` > 0 lets each
-chamber's pressure relax towards the isothermal pressure of its air mass, which the
-FMU then tracks (heat_transfer).
+laminar leak across the piston seal (piston_leakage); ``h_wall`` > 0 lets each
+chamber's air exchange heat with its wall, relaxing the pressure towards the isothermal
+pressure of its air mass (which the FMU then tracks) with time constant
+m c_v / (h_wall A_wall) (heat_transfer).
 """
+import math
+
 from boomfmi_cylinder_lib.fmislave import BoomSlave, input, output, parameter
 from boomfmi_cylinder_lib.physics import (Cylinder as CylinderParams, Gas, ParameterError,
                                           chamber_pressure_step, chamber_volumes, check_cylinder,
                                           check_gas)
 from boomfmi_cylinder_lib.physics import reference_rig as rig
-from boomfmi_cylinder_lib.physics.effects import leakage_flow, thermal_relaxation_step
+from boomfmi_cylinder_lib.physics.effects import (chamber_wall_area, leakage_flow, thermal_relaxation_step,
+                                                  thermal_time_constant)
 
 
 class Cylinder(BoomSlave):
@@ -43,7 +47,7 @@ class Cylinder(BoomSlave):
         parameter("p_a0", rig.P_atm, "Pa", "initial absolute pressure in chamber A", min=0.0),
         parameter("p_b0", rig.P_atm, "Pa", "initial absolute pressure in chamber B", min=0.0),
         parameter("C_leak", 0.0, "kg/(s.Pa)", "piston_leakage: laminar conductance of the piston seal, A to B; 0: off", min=0.0),
-        parameter("tau_thermal", 0.0, "s", "heat_transfer: time constant of the pressure's relaxation towards the isothermal; 0: off", min=0.0),
+        parameter("h_wall", 0.0, "W/(m2.K)", "heat_transfer: heat-transfer coefficient between the air and the chamber wall; 0: off", min=0.0),
     )
 
     def __init__(self, **kwargs):
@@ -76,11 +80,16 @@ class Cylinder(BoomSlave):
         s_b = min(self.dmdot_b_dp_b, 0.0) - self.C_leak
         p_a = chamber_pressure_step(self.p_a, V_a0, V_a1, mdot_a, dt, self._gas, s_a)
         p_b = chamber_pressure_step(self.p_b, V_b0, V_b1, mdot_b, dt, self._gas, s_b)
-        if self.tau_thermal > 0.0:
+        if self.h_wall > 0.0:
             self._m_a += dt * (mdot_a + 0.5 * s_a * (p_a - self.p_a))
             self._m_b += dt * (mdot_b + 0.5 * s_b * (p_b - self.p_b))
-            p_a = thermal_relaxation_step(p_a, self._m_a, V_a1, dt, self.tau_thermal, self.R, self.T)
-            p_b = thermal_relaxation_step(p_b, self._m_b, V_b1, dt, self.tau_thermal, self.R, self.T)
+            bore = (4.0 * self.A_a / math.pi) ** 0.5
+            for side, m, V, A in (("a", self._m_a, V_a1, self.A_a), ("b", self._m_b, V_b1, self.A_b)):
+                tau = thermal_time_constant(m, chamber_wall_area(V, A, bore), self.h_wall, self.k, self.R)
+                if side == "a":
+                    p_a = thermal_relaxation_step(p_a, m, V, dt, tau, self.R, self.T)
+                else:
+                    p_b = thermal_relaxation_step(p_b, m, V, dt, tau, self.R, self.T)
         if not (p_a > 0.0 and p_b > 0.0):
             raise ValueError(
                 f"a chamber emptied (p_a = {p_a:g} Pa, p_b = {p_b:g} Pa): the outflow "

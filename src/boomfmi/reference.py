@@ -29,7 +29,9 @@ from .physics import reference_rig as rig
 from .physics.effects import cushion_force as fx_cushion
 from .physics.effects import deadband_command as fx_deadband
 from .physics.effects import sensor_lag_step as fx_sensor
+from .physics.effects import chamber_wall_area as fx_wall
 from .physics.effects import stribeck_load as fx_stribeck
+from .physics.effects import thermal_time_constant as fx_tau
 
 
 @dataclass
@@ -67,12 +69,12 @@ class Model:
 
 #: Each effect's parameters in ``Model.effects`` (the FMU options' names in brackets):
 #: valve_dynamics tau [s] (valve.tau_spool), valve_deadband width [V] (valve.deadband),
-#: heat_transfer tau [s] (cylinder.tau_thermal), piston_leakage C [kg/(s Pa)]
+#: heat_transfer h [W/(m^2 K)] (cylinder.h_wall), piston_leakage C [kg/(s Pa)]
 #: (cylinder.C_leak), stribeck_friction v_s [m/s] (boom_load.v_s), end_cushioning
 #: length [m], damping [N s/m] (boom_load.l_cushion, b_cushion), sensor_lag tau [s]
 #: (hardware_bridge.tau_sensor).
 EFFECT_PARAMETERS = {"valve_dynamics": ("tau",), "valve_deadband": ("width",),
-                     "heat_transfer": ("tau",), "piston_leakage": ("C",),
+                     "heat_transfer": ("h",), "piston_leakage": ("C",),
                      "stribeck_friction": ("v_s",), "end_cushioning": ("length", "damping"),
                      "sensor_lag": ("tau",)}
 
@@ -99,7 +101,8 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
     fx = model.effects
     tau_v = fx.get("valve_dynamics", {}).get("tau", 0.0)
     width = fx.get("valve_deadband", {}).get("width", 0.0)
-    tau_th = fx.get("heat_transfer", {}).get("tau", 0.0)
+    h_wall = fx.get("heat_transfer", {}).get("h", 0.0)
+    bore = math.sqrt(4.0 * model.cylinder.A_a / math.pi)
     C_leak = fx.get("piston_leakage", {}).get("C", 0.0)
     v_s = fx.get("stribeck_friction", {}).get("v_s", 0.0)
     l_c = fx.get("end_cushioning", {}).get("length", 0.0)
@@ -107,7 +110,7 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
     tau_s = fx.get("sensor_lag", {}).get("tau", 0.0)
     k_, R_, T_ = model.gas
     i_y = 4 if tau_v > 0 else None                      # the spool's position [V]
-    i_m = (4 + (i_y is not None)) if tau_th > 0 else None   # the chambers' air masses [kg]
+    i_m = (4 + (i_y is not None)) if h_wall > 0 else None   # the chambers' air masses [kg]
     n_state = 4 + (i_y is not None) + 2 * (i_m is not None)
     atol = np.array([1e-4, 1e-4, 1e-13, 1e-11] + [1e-9] * (i_y is not None) + [1e-15, 1e-15] * (i_m is not None))
 
@@ -127,8 +130,13 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
             extra.append((u - y[i_y]) / tau_v)
         if i_m is not None:
             V_a, V_b = ph.chamber_volumes(x, model.cylinder)
-            dp_a += (y[i_m] * R_ * T_ / V_a - p_a) / tau_th
-            dp_b += (y[i_m + 1] * R_ * T_ / V_b - p_b) / tau_th
+            for i, (V, A, m) in enumerate(((V_a, model.cylinder.A_a, y[i_m]), (V_b, model.cylinder.A_b, y[i_m + 1]))):
+                tau = fx_tau(max(m, 1e-12), fx_wall(V, A, bore), h_wall, k_, R_)
+                rate = (m * R_ * T_ / V - (p_a, p_b)[i]) / tau
+                if i == 0:
+                    dp_a += rate
+                else:
+                    dp_b += rate
             extra += [mdot_a, mdot_b]
         return dp_a, dp_b, extra
 

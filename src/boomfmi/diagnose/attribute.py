@@ -34,7 +34,7 @@ CHANNELS = ("p_a", "p_b", "x")
 CANDIDATES = {
     "valve_dynamics": [("tau", 2e-4, 0.05, True)],
     "valve_deadband": [("width", 0.01, 1.5, False)],
-    "heat_transfer": [("tau", 0.01, 10.0, True)],
+    "heat_transfer": [("h", 1.0, 2000.0, True)],
     "piston_leakage": [("C", 1e-13, 5e-10, True)],
     "stribeck_friction": [("v_s", 2e-4, 0.1, True)],
     "end_cushioning": [("length", 1e-3, 0.02, False), ("damping", 10.0, 3e4, True)],

@@ -12,8 +12,11 @@ valve_dynamics (valve)       tau      first-order lag of the spool:             
                                       dy/dt = (u - y) / tau
 valve_deadband (valve)       width    no opening for |u - 5| < width; linear      width = 0
                                       beyond, full opening still at 0 and 10 V
-heat_transfer (cylinder)     tau      the pressure relaxes towards the isothermal tau = 0
-                                      pressure m R T_w / V with time constant tau
+heat_transfer (cylinder)     h        the air exchanges heat with the chamber's   h = 0
+                                      wall: the pressure relaxes towards the
+                                      isothermal m R T_w / V with time constant
+                                      m c_v / (h A_wall), A_wall the wall the air
+                                      touches (end faces and barrel)
 piston_leakage (cylinder)    C        laminar leak A -> B: C (p_a - p_b)          C = 0
 stribeck_friction (boom)     v_s      Coulomb level F_d + (F_s - F_d) e^(-|v|/v_s) v_s = 0
 end_cushioning (boom)        l_c, b   a damping force -b v within l_c of the end  l_c = 0
@@ -53,10 +56,26 @@ def thermal_relaxation_step(p: float, m: float, V: float, dt: float, tau: float,
     pressure ``m R T_wall / V`` of its air mass ``m`` [kg] in volume ``V`` [m^3], with
     time constant ``tau`` [s]: the wall takes back the heat of compression (and gives
     it to expanding air).  ``tau <= 0`` leaves p alone."""
-    if tau <= 0.0:
+    if not 0.0 < tau < math.inf:
         return p
     p_iso = m * R * T_wall / V
     return p_iso + (p - p_iso) * math.exp(-dt / tau)
+
+
+def chamber_wall_area(V: float, A_piston: float, bore: float) -> float:
+    """The wall [m^2] a chamber's air of volume ``V`` [m^3] touches: the two end faces
+    ``2 A_piston`` and the barrel over the chamber's equivalent length ``V / A_piston``
+    (dead volume included)."""
+    return 2.0 * A_piston + math.pi * bore * V / A_piston
+
+
+def thermal_time_constant(m: float, wall_area: float, h: float, k: float, R: float) -> float:
+    """Time constant [s] of a chamber's heat exchange with its wall: ``m c_v / (h A)``,
+    air mass ``m`` [kg], wall ``A`` [m^2], coefficient ``h`` [W/(m^2 K)],
+    ``c_v = R / (k - 1)``; infinite for h = 0."""
+    if h <= 0.0:
+        return math.inf
+    return m * R / (k - 1.0) / (h * wall_area)
 
 
 def leakage_flow(p_a: float, p_b: float, C: float) -> float:
