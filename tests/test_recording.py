@@ -12,7 +12,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from boomfmi.recording import RecordingError, RecordingWriter, read_recording, write_recording
+from boomfmi.recording import RecordingError, read_recording, write_recording
 
 GOOD = "t,u,p_a,p_b,alpha\n0.000,10,0,600000,0.634\n0.001,10,1.5,599000,0.634\n0.002,1.0,30000,580000,0.635\n"
 

@@ -30,7 +30,7 @@ import time
 from boomfmi_hardware_bridge_lib.fmislave import BoomSlave, input, output, parameter
 from boomfmi_hardware_bridge_lib.link.client import RigClient, parse_address
 from boomfmi_hardware_bridge_lib.link.protocol import LinkError, load_key
-from boomfmi_hardware_bridge_lib.physics import Geometry, ParameterError, alpha_from_x, check_geometry, x_from_alpha
+from boomfmi_hardware_bridge_lib.physics import Geometry, ParameterError, check_geometry, x_from_alpha
 from boomfmi_hardware_bridge_lib.physics import reference_rig as rig
 from boomfmi_hardware_bridge_lib.physics.effects import sensor_lag_step
 from boomfmi_hardware_bridge_lib.recording import RecordingError, parse_recording

@@ -8,7 +8,6 @@ so far has been written.
 """
 from __future__ import annotations
 
-from pathlib import Path
 
 from .experiments import profile
 from .recording import RecordingWriter

@@ -17,10 +17,14 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .physics import reference_rig as rig
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 REQUIRED = ("t", "u", "p_a", "p_b", "alpha")
 #: Reference-rig values a sidecar may override (``{"rig": {...}}``), by the FMUs'
@@ -52,7 +56,7 @@ class RecordingError(ValueError):
 class Recording:
     """A validated recording: ``data`` in SI units (pressures still gauge, as stored)."""
     path: Path
-    data: "pd.DataFrame"  # noqa: F821
+    data: "pd.DataFrame"
     rig: dict = field(default_factory=dict)      #: reference-rig overrides from the sidecar
     notes: str = ""
 

@@ -20,6 +20,7 @@ from .experiments import PROFILES, profile
 from .physics import reference_rig as rig
 from .recording import read_recording
 from .system.master import CoSimulation
+from .system.ssv import Parameter
 
 RECORDED = ("p_a", "p_b", "alpha", "x", "v")
 
@@ -61,26 +62,17 @@ def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
                    stop_time: float | None = None, algorithm: str = "gauss-seidel",
                    parameters=None, progress: bool = False) -> pd.DataFrame:
     """Simulate ``experiment`` on the SSP; return recording columns plus x and v."""
-    if experiment not in PROFILES:
-        if Path(experiment).suffix.lower() != ".csv" and not Path(experiment).exists():
-            raise ValueError(f"unknown experiment {experiment!r}: give one of {', '.join(PROFILES)} "
-                             f"or a recording (.csv)")
-        from .system.ssp import read_ssp
-        from fmpy import read_model_description
-        import tempfile
-        structure = read_ssp(ssp)
-        names = {}
-        with tempfile.TemporaryDirectory() as tmp:
-            for comp in structure.components.values():
-                f = Path(tmp) / f"{comp.name}.fmu"
-                f.write_bytes(structure.read(comp.source))
-                names[comp.name] = {v.name for v in read_model_description(str(f)).modelVariables
-                                    if v.causality == "parameter"}
-        over = rig_parameters(experiment, names)
-        if over:
-            parameters = [over, *([] if parameters is None else
-                                  [parameters] if isinstance(parameters, (str, Path, dict)) else list(parameters))]
+    if experiment not in PROFILES and Path(experiment).suffix.lower() != ".csv" \
+            and not Path(experiment).exists():
+        raise ValueError(f"unknown experiment {experiment!r}: give one of {', '.join(PROFILES)} "
+                         f"or a recording (.csv)")
     with CoSimulation(ssp, step, algorithm, parameters) as cosim:
+        names = {n: {v.name for v in i.model_description.modelVariables if v.causality == "parameter"}
+                 for n, i in cosim.instances.items()}
+        over = rig_parameters(experiment, names)
+        if over:             # the recording's rig over the SSP's own values, under --params
+            cosim.structure.bind({n: Parameter(n, "Real", v) for n, v in over.items() if n not in cosim.given},
+                                 f"{experiment} (sidecar)")
         u_names = [n for n in cosim.inputs if n.rpartition(".")[2] == "u"]
         if not u_names:
             raise ValueError(f"the system has no free input named 'u' to drive; its inputs: {cosim.inputs}")

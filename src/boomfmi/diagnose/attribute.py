@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
-from ..identify import model_for, simulate_recording
+from ..identify import nrmse, recorded, simulate_recording
 from ..identify.preprocess import lowpass
 
 CHANNELS = ("p_a", "p_b", "x")
@@ -49,12 +49,6 @@ RTOL = 1e-6            #: the reference solver's tolerance when scoring
 FIT_RTOL = 1e-5        #: and while fitting (each fit runs the model a dozen times or more)
 
 
-def measured(rec) -> dict:
-    from ..physics import x_from_alpha
-    return {"x": x_from_alpha(rec.data["alpha"].to_numpy(float)),
-            "p_a": rec.data["p_a"].to_numpy(float), "p_b": rec.data["p_b"].to_numpy(float)}
-
-
 def errors(values: dict, effects: dict, rec, rtol: float = RTOL) -> dict:
     """NRMSE per channel of the model (``values`` and ``effects``) on one recording.
 
@@ -66,9 +60,7 @@ def errors(values: dict, effects: dict, rec, rtol: float = RTOL) -> dict:
         from ..reference import _first_order
         t = sim["time"].to_numpy()
         sim = {c: _first_order(sim[c].to_numpy(), t, effects["sensor_lag"]["tau"]) for c in CHANNELS}
-    m = measured(rec)
-    return {c: float(np.sqrt(np.mean((np.asarray(sim[c]) - m[c]) ** 2)) / max(float(np.ptp(m[c])), 1e-12))
-            for c in CHANNELS}
+    return nrmse(sim, rec)
 
 
 _cache: dict = {}
@@ -91,7 +83,7 @@ def mean_errors(values, effects, recs, rtol: float = RTOL) -> dict:
 def noise_floor(rec) -> dict:
     """Each channel's measurement noise over its range: the RMS of what a 50 Hz
     low-pass removes."""
-    m = measured(rec)
+    m = recorded(rec)
     fs = 1.0 / float(np.median(np.diff(rec.data["t"].to_numpy(float))))
     return {c: float(np.std(m[c] - lowpass(m[c], fs, 50.0)) / max(float(np.ptp(m[c])), 1e-12)) for c in CHANNELS}
 

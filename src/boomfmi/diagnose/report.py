@@ -17,20 +17,12 @@ import numpy as np
 from .. import physics as ph
 from ..identify import identify_recordings, simulate_recording
 from ..recording import read_recording
-from .attribute import CHANNELS, attribute, measured
+from .._json import plain
+from ..identify import recorded
+from .attribute import CHANNELS, attribute
 from .localise import localise
 
 MIN_TRAVEL = 1e-3     #: [m] a recording whose piston moves less than this cannot be judged
-
-
-def _plain(obj):
-    if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, (np.floating, np.integer)):
-        return obj.item()
-    return obj
 
 
 def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None) -> dict:
@@ -46,7 +38,7 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None) -> dict
     if len(rigs) > 1:
         raise ValueError("the recordings come from different rigs (their sidecars' 'rig' values differ): "
                          + ", ".join(str(r.path) for r in fit_recs + hold_recs))
-    still = [str(r.path) for r in fit_recs + hold_recs if float(np.ptp(measured(r)["x"])) < MIN_TRAVEL]
+    still = [str(r.path) for r in fit_recs + hold_recs if float(np.ptp(recorded(r)["x"])) < MIN_TRAVEL]
     if still:
         doc = {"judgeable": False,
                "reason": f"no motion in {', '.join(still)}: the piston moves less than "
@@ -67,7 +59,7 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None) -> dict
     abs_sim["p_b"] += hold.P_atm
     load = ph.Load(**{k: values[k] for k in ("K_v", "F_s", "F_d", "F_L", "M")})
     loc = localise(prep, abs_sim, load) if att.gap else None
-    effects = [{"name": c.name, "params": c.params if "+" not in c.name else c.params,
+    effects = [{"name": c.name, "params": c.params,
                 "nrmse_holdout_after": {k: round(v, 6) for k, v in c.holdout.items()},
                 "shrink": round(c.shrink, 4), "score": c.score} for c in att.candidates]
     doc = {"judgeable": True,
@@ -89,7 +81,7 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None) -> dict
 
 
 def _write(out: Path, doc: dict, hold, base_sim, after_sim, loc=None) -> None:
-    (out / "diagnosis.json").write_text(json.dumps(_plain(doc), indent=2))
+    (out / "diagnosis.json").write_text(json.dumps(plain(doc), indent=2))
     images = []
     if hold is not None:
         images = _plots(out, hold, base_sim, after_sim, loc, doc)
@@ -101,7 +93,7 @@ def _plots(out: Path, hold, base_sim, after_sim, loc, doc) -> list[str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     t = hold.data["t"].to_numpy()
-    m = measured(hold)
+    m = recorded(hold)
     names = []
     scale = {"x": (1e3, "x [mm]"), "p_a": (1e-5, "p_a [bar gauge]"), "p_b": (1e-5, "p_b [bar gauge]")}
     for c in CHANNELS:
@@ -144,7 +136,7 @@ def _html(doc: dict, images: list[str]) -> str:
     else:
         headline = "The gap is explained by: " + ", ".join(f"<b>{e(v)}</b>" for v in verdict)
     rows = "".join(
-        f"<tr><td>{e(c['name'])}</td><td>{e(json.dumps(_plain(c['params'])))}</td>"
+        f"<tr><td>{e(c['name'])}</td><td>{e(json.dumps(plain(c['params'])))}</td>"
         f"<td>{c['shrink']:.3f}</td><td>{c['score']:.3f}</td>"
         f"<td>{' / '.join(f'{100 * v:.3f} %' for v in c['nrmse_holdout_after'].values())}</td></tr>"
         for c in doc.get("effects", []))

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import physics as ph
-from ..physics import reference_rig as rig
+from .._json import plain
 from ..recording import read_recording
 from .fit import FitResult, identify
 from .paper import identify_paper
@@ -85,14 +85,19 @@ def simulate_recording(values: dict, rec, effects: dict | None = None, rtol: flo
     return sim
 
 
+def recorded(rec) -> dict:
+    """A recording's x (Eq. 12 from its alpha), p_a and p_b (gauge) as arrays."""
+    return {"x": ph.x_from_alpha(rec.data["alpha"].to_numpy(dtype=float)),
+            "p_a": rec.data["p_a"].to_numpy(float), "p_b": rec.data["p_b"].to_numpy(float)}
+
+
 def nrmse(sim, rec) -> dict:
-    """NRMSE of x, p_a, p_b: RMS error over the recording's range."""
+    """NRMSE of x, p_a, p_b: RMS error over the recording's range.  ``sim`` maps each
+    channel to values on the recording's samples (gauge pressures)."""
     out = {}
-    x_rec = ph.x_from_alpha(rec.data["alpha"].to_numpy(dtype=float))
-    for name, measured in (("x", x_rec), ("p_a", rec.data["p_a"].to_numpy(float)),
-                           ("p_b", rec.data["p_b"].to_numpy(float))):
+    for name, measured in recorded(rec).items():
         span = float(np.ptp(measured)) or 1.0
-        out[name] = float(np.sqrt(np.mean((sim[name].to_numpy() - measured) ** 2)) / span)
+        out[name] = float(np.sqrt(np.mean((np.asarray(sim[name], float) - measured) ** 2)) / span)
     return out
 
 
@@ -130,7 +135,7 @@ def write_outputs(result: FitResult, recs, out, holdout=()) -> dict:
            "params": {k: {"value": e.value, "ci95": list(e.ci95), "unit": e.unit}
                       for k, e in result.params.items()},
            "warnings": result.warnings,
-           "details": _plain(result.details)}
+           "details": plain(result.details)}
     finite = {k: v for k, v in values.items() if math.isfinite(v)}
     doc["nrmse_fit"] = {str(r.path): nrmse(simulate_recording(finite, r), r) for r in recs} if _usable(finite) else {}
     for h in holdout:
@@ -149,14 +154,4 @@ def _usable(values: dict) -> bool:
     return all(k in values and values[k] > 0 for k in ("K_v", "F_d", "M")) and "F_L" in values
 
 
-def _plain(obj):
-    if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, (np.floating, np.integer)):
-        return obj.item()
-    return obj
-
-
-__all__ = ["identify_recordings", "write_outputs", "simulate_recording", "nrmse", "FitResult"]
+__all__ = ["identify_recordings", "write_outputs", "simulate_recording", "nrmse", "recorded", "FitResult"]

@@ -100,15 +100,18 @@ class CoSimulation:
             raise ValueError(f"the communication step {step} s is below a nanosecond")
         self.algorithm = algorithm
         self.structure: SystemStructure = read_ssp(ssp)
+        self.given: set[str] = set()          #: names the caller's parameter sets bind
         for extra in _as_list(parameters):
             if isinstance(extra, Mapping):
-                self.structure.bind({n: Parameter(n, _ptype(v), v) for n, v in extra.items()},
-                                    "parameters given to the master")
+                bound = {n: Parameter(n, _ptype(v), v) for n, v in extra.items()}
+                self.structure.bind(bound, "parameters given to the master")
             else:
                 path = Path(extra)
                 if not path.is_file():
                     raise SspError(f"{path}: no such parameter set")
-                self.structure.bind(read_ssv(path.read_bytes(), str(path)), str(path))
+                bound = read_ssv(path.read_bytes(), str(path))
+                self.structure.bind(bound, str(path))
+            self.given.update(bound)
         self._tmp = tempfile.TemporaryDirectory(prefix="boomfmi_ssp_")
         self._ran = False
         self.instances: dict[str, FmuInstance] = {}
