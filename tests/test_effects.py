@@ -5,7 +5,8 @@ import math
 
 import pytest
 
-from boomfmi.physics import Load
+from boomfmi.physics import Load, mass_flow
+from boomfmi.physics import reference_rig as rig
 from boomfmi.physics import effects as fx
 
 
@@ -16,7 +17,7 @@ def test_every_effect_is_off_at_its_off_value():
     assert fx.thermal_relaxation_step(4e5, 1e-4, 3e-5, 1e-3, 0.0, 287.0, 293.15) == 4e5
     assert fx.leakage_flow(5e5, 2e5, 0.0) == 0.0
     assert fx.stribeck_load(load, 0.01, 0.0) is load
-    assert fx.cushion_force(0.059, 0.05, 0.06, 0.0, 500.0) == 0.0
+    assert fx.cushion_outflow(-1e-3, 4e5, 0.0, 0.0, 1e-7, 1e5) == -1e-3
     assert fx.sensor_lag_step(0.1, 0.2, 1e-3, 0.0) == 0.2
 
 
@@ -52,12 +53,23 @@ def test_stribeck_falls_from_static_to_coulomb():
     assert fx.stribeck_load(load, 1.0, 0.01).F_d == pytest.approx(80.0, abs=1e-9)
 
 
-def test_cushion_brakes_only_near_the_end_it_approaches():
-    L, l_c, b = 0.06, 0.01, 800.0
-    assert fx.cushion_force(0.055, 0.05, L, l_c, b) == pytest.approx(-b * 0.05 * 0.5)
-    assert fx.cushion_force(0.055, -0.05, L, l_c, b) == 0.0            # moving away
-    assert fx.cushion_force(0.004, -0.05, L, l_c, b) == pytest.approx(b * 0.05 * 0.6)
-    assert fx.cushion_force(0.03, 0.05, L, l_c, b) == 0.0
+def test_cushion_outflow_is_the_series_of_valve_and_needle():
+    mdot_n = mass_flow(1e-7, rig.P_s, rig.P_e)
+    full = fx.cushion_outflow(-2 * mdot_n, rig.P_s, 0.0, 0.01, 1e-7, rig.P_e)
+    assert full == pytest.approx(-2 * mdot_n / math.sqrt(5.0), rel=1e-12)
+    half = fx.cushion_outflow(-2 * mdot_n, rig.P_s, 0.009, 0.01, 1e-7, rig.P_e)   # spear half in
+    assert half == pytest.approx(-2 * mdot_n / math.sqrt(3.0), rel=1e-12)
+    assert -2 * mdot_n < half < full < 0.0
+    assert fx.cushion_outflow(1e-3, rig.P_s, 0.0, 0.01, 1e-7, rig.P_e) == 1e-3        # inflow: check valve
+    assert fx.cushion_outflow(-1e-3, rig.P_s, 0.02, 0.01, 1e-7, rig.P_e) == -1e-3     # outside the cushion
+
+
+def test_cushion_outflow_slope_matches_a_finite_difference():
+    args = (0.0, 0.01, 1e-7, rig.P_e)
+    p, m, s = 4e5, -5e-3, -2e-8
+    h = 10.0
+    fd = (fx.cushion_outflow(m + s * h, p + h, *args) - fx.cushion_outflow(m - s * h, p - h, *args)) / (2 * h)
+    assert fx.cushion_outflow_slope(m, s, p, *args) == pytest.approx(fd, rel=1e-4)
 
 
 def test_sensor_lag_is_exact_first_order():

@@ -17,6 +17,8 @@ INVALID = [
     ("cylinder", {"V_a0": 0.0}, "V_a0"),
     ("cylinder", {"V_b0": -1e-6}, "V_b0"),
     ("cylinder", {"p_a0": 0.0}, "p_a0"),
+    ("cylinder", {"l_cushion": 0.05}, "l_cushion"),
+    ("cylinder", {"l_cushion": 0.01, "A_cushion": 0.0}, "A_cushion"),
     ("boom_load", {"M": 0.0}, "M"),
     ("boom_load", {"M": -22.7}, "M"),
     ("boom_load", {"L": 0.0}, "L"),

@@ -6,16 +6,15 @@ cylinder angle phi (Eq. 8 to 12).  Within a step the pressures and f_ext are hel
 motion is integrated in short substeps with the exact stick/slip rule of
 ``physics.load``, and x never leaves [0, L].
 
-Unmodelled effects, off by default (``physics/effects.py``): ``v_s`` > 0 makes the
-Coulomb friction fall from F_s to F_d as speed rises (stribeck_friction);
-``l_cushion`` > 0 brakes the piston with ``b_cushion`` within that distance of the stop
-it approaches (end_cushioning).
+Unmodelled effect, off by default (``physics/effects.py``): ``v_s`` > 0 makes the
+Coulomb friction fall from F_s to F_d as speed rises (stribeck_friction).  The end
+cushioning acts on the exhaust air, so it is the cylinder's option.
 """
 from boomfmi_boom_load_lib.fmislave import BoomSlave, input, output, parameter
 from boomfmi_boom_load_lib.physics import (Cylinder, Geometry, Load, ParameterError, advance_load,
                                            alpha_from_x, check_geometry, check_load, phi_from_x)
 from boomfmi_boom_load_lib.physics import reference_rig as rig
-from boomfmi_boom_load_lib.physics.effects import cushion_force, stribeck_load
+from boomfmi_boom_load_lib.physics.effects import stribeck_load
 from boomfmi_boom_load_lib.physics.validation import require_positive
 
 
@@ -44,15 +43,13 @@ class BoomLoad(BoomSlave):
         parameter("P_atm", rig.P_atm, "Pa", "atmospheric pressure acting on the rod", min=0.0),
         parameter("x0", 0.0, "m", "initial piston position", min=0.0),
         parameter("v_s", 0.0, "m/s", "stribeck_friction: Stribeck velocity of exp(-|v|/v_s); 0: off (the paper's step)", min=0.0),
-        parameter("l_cushion", 0.0, "m", "end_cushioning: cushion length before each stop; 0: off", min=0.0),
-        parameter("b_cushion", 0.0, "N.s/m", "end_cushioning: cushion damping at the stop", min=0.0),
     )
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self.modelName = "boom_load"
         self._cyl, self._geom, self._load = Cylinder(), Geometry(), Load()
-        self._load_at = self._force_at = None
+        self._load_at = None
 
     def setup(self):
         self._load = Load(K_v=self.K_v, F_s=self.F_s, F_d=self.F_d, F_L=self.F_L, M=self.M)
@@ -65,9 +62,8 @@ class BoomLoad(BoomSlave):
         if not 0.0 <= self.x0 <= self.L:
             raise ParameterError("x0", self.x0, f"must lie within the stroke [0, {self.L:g}] m")
         self.x, self.v = float(self.x0), 0.0
-        v_s, L, l_c, b_c = self.v_s, self.L, self.l_cushion, self.b_cushion
+        v_s = self.v_s
         self._load_at = (lambda load, v: stribeck_load(load, v, v_s)) if v_s > 0.0 else None
-        self._force_at = (lambda x, v: cushion_force(x, v, L, l_c, b_c)) if l_c > 0.0 and b_c > 0.0 else None
 
     @property
     def alpha(self):
@@ -80,4 +76,4 @@ class BoomLoad(BoomSlave):
     def step(self, t, dt):
         self.x, self.v = advance_load(self.x, self.v, dt, self.p_a, self.p_b, self.f_ext,
                                       self._cyl, self._geom, self._load, self.P_atm,
-                                      load_at=self._load_at, force_at=self._force_at)
+                                      load_at=self._load_at)

@@ -12,7 +12,9 @@ Unmodelled effects, off by default (``physics/effects.py``): ``C_leak`` > 0 adds
 laminar leak across the piston seal (piston_leakage); ``h_wall`` > 0 lets each
 chamber's air exchange heat with its wall, relaxing the pressure towards the isothermal
 pressure of its air mass (which the FMU then tracks) with time constant
-m c_v / (h_wall A_wall) (heat_transfer).
+m c_v / (h_wall A_wall) (heat_transfer); ``l_cushion`` > 0 makes a chamber's outflow
+within that distance of its end of stroke also pass the cushion needle of area
+``A_cushion`` to the exhaust (end_cushioning; DSNU-PPVA).
 """
 import math
 
@@ -21,7 +23,8 @@ from boomfmi_cylinder_lib.physics import (Cylinder as CylinderParams, Gas, Param
                                           chamber_pressure_step, chamber_volumes, check_cylinder,
                                           check_gas)
 from boomfmi_cylinder_lib.physics import reference_rig as rig
-from boomfmi_cylinder_lib.physics.effects import (chamber_wall_area, leakage_flow, thermal_relaxation_step,
+from boomfmi_cylinder_lib.physics.effects import (chamber_wall_area, cushion_outflow, cushion_outflow_slope,
+                                                  leakage_flow, thermal_relaxation_step,
                                                   thermal_time_constant)
 
 
@@ -47,6 +50,9 @@ class Cylinder(BoomSlave):
         parameter("p_a0", rig.P_atm, "Pa", "initial absolute pressure in chamber A", min=0.0),
         parameter("p_b0", rig.P_atm, "Pa", "initial absolute pressure in chamber B", min=0.0),
         parameter("C_leak", 0.0, "kg/(s.Pa)", "piston_leakage: laminar conductance of the piston seal, A to B; 0: off", min=0.0),
+        parameter("l_cushion", 0.0, "m", "end_cushioning: cushion length at each end of stroke; 0: off", min=0.0),
+        parameter("A_cushion", 1e-7, "m2", "end_cushioning: cushion needle's orifice area", min=0.0),
+        parameter("P_e", rig.P_e, "Pa", "end_cushioning: exhaust pressure behind the cushion needle, absolute", min=0.0),
         parameter("h_wall", 0.0, "W/(m2.K)", "heat_transfer: heat-transfer coefficient between the air and the chamber wall; 0: off", min=0.0),
     )
 
@@ -60,6 +66,12 @@ class Cylinder(BoomSlave):
         self._gas = Gas(k=self.k, R=self.R, T=self.T)
         check_cylinder(self._cyl)
         check_gas(self._gas)
+        if self.l_cushion > 0.0:
+            if not 0.0 < self.l_cushion <= 0.5 * self.L:
+                raise ParameterError("l_cushion", self.l_cushion, f"must lie in (0, L/2 = {0.5 * self.L:g}] m")
+            for name in ("A_cushion", "P_e"):
+                if not getattr(self, name) > 0.0:
+                    raise ParameterError(name, getattr(self, name), "must be > 0 with the cushion on (l_cushion > 0)")
         for name in ("p_a0", "p_b0"):
             if not getattr(self, name) > 0.0:
                 raise ParameterError(name, getattr(self, name), "an absolute pressure must be > 0")
@@ -74,10 +86,17 @@ class Cylinder(BoomSlave):
         x_1 = min(max(x_0 + self.v * dt, 0.0), L)
         V_a0, V_b0 = chamber_volumes(x_0, self._cyl)
         V_a1, V_b1 = chamber_volumes(x_1, self._cyl)
+        mdot_a, mdot_b = self.mdot_a, self.mdot_b
+        s_a, s_b = min(self.dmdot_a_dp_a, 0.0), min(self.dmdot_b_dp_b, 0.0)
+        if self.l_cushion > 0.0:
+            cushion = (self.l_cushion, self.A_cushion, self.P_e, self._gas)
+            s_a = cushion_outflow_slope(mdot_a, s_a, self.p_a, x_0, *cushion)
+            s_b = cushion_outflow_slope(mdot_b, s_b, self.p_b, L - x_0, *cushion)
+            mdot_a = cushion_outflow(mdot_a, self.p_a, x_0, *cushion)
+            mdot_b = cushion_outflow(mdot_b, self.p_b, L - x_0, *cushion)
         q = leakage_flow(self.p_a, self.p_b, self.C_leak)      # held over the step
-        mdot_a, mdot_b = self.mdot_a - q, self.mdot_b + q
-        s_a = min(self.dmdot_a_dp_a, 0.0) - self.C_leak
-        s_b = min(self.dmdot_b_dp_b, 0.0) - self.C_leak
+        mdot_a, mdot_b = mdot_a - q, mdot_b + q
+        s_a, s_b = s_a - self.C_leak, s_b - self.C_leak
         p_a = chamber_pressure_step(self.p_a, V_a0, V_a1, mdot_a, dt, self._gas, s_a)
         p_b = chamber_pressure_step(self.p_b, V_b0, V_b1, mdot_b, dt, self._gas, s_b)
         if self.h_wall > 0.0:

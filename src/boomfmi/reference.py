@@ -26,7 +26,7 @@ from scipy.integrate import solve_ivp
 
 from . import physics as ph
 from .physics import reference_rig as rig
-from .physics.effects import cushion_force as fx_cushion
+from .physics.effects import cushion_outflow as fx_cushion
 from .physics.effects import deadband_command as fx_deadband
 from .physics.effects import sensor_lag_step as fx_sensor
 from .physics.effects import chamber_wall_area as fx_wall
@@ -71,11 +71,11 @@ class Model:
 #: valve_dynamics tau [s] (valve.tau_spool), valve_deadband width [V] (valve.deadband),
 #: heat_transfer h [W/(m^2 K)] (cylinder.h_wall), piston_leakage C [kg/(s Pa)]
 #: (cylinder.C_leak), stribeck_friction v_s [m/s] (boom_load.v_s), end_cushioning
-#: length [m], damping [N s/m] (boom_load.l_cushion, b_cushion), sensor_lag tau [s]
+#: length [m], A_n [m^2] (cylinder.l_cushion, A_cushion), sensor_lag tau [s]
 #: (hardware_bridge.tau_sensor).
 EFFECT_PARAMETERS = {"valve_dynamics": ("tau",), "valve_deadband": ("width",),
                      "heat_transfer": ("h",), "piston_leakage": ("C",),
-                     "stribeck_friction": ("v_s",), "end_cushioning": ("length", "damping"),
+                     "stribeck_friction": ("v_s",), "end_cushioning": ("length", "A_n"),
                      "sensor_lag": ("tau",)}
 
 
@@ -106,7 +106,7 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
     C_leak = fx.get("piston_leakage", {}).get("C", 0.0)
     v_s = fx.get("stribeck_friction", {}).get("v_s", 0.0)
     l_c = fx.get("end_cushioning", {}).get("length", 0.0)
-    b_c = fx.get("end_cushioning", {}).get("damping", 0.0)
+    A_n = fx.get("end_cushioning", {}).get("A_n", 0.0)
     tau_s = fx.get("sensor_lag", {}).get("tau", 0.0)
     k_, R_, T_ = model.gas
     i_y = 4 if tau_v > 0 else None                      # the spool's position [V]
@@ -121,6 +121,9 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
         if width > 0:
             cmd = fx_deadband(cmd, width)
         mdot_a, mdot_b = ph.chamber_flows(cmd, p_a, p_b, model.valve, model.gas)
+        if l_c > 0:
+            mdot_a = fx_cushion(mdot_a, p_a, x, l_c, A_n, model.valve.P_e, model.gas)
+            mdot_b = fx_cushion(mdot_b, p_b, L - x, l_c, A_n, model.valve.P_e, model.gas)
         if C_leak > 0:
             q = C_leak * (p_a - p_b)
             mdot_a, mdot_b = mdot_a - q, mdot_b + q
@@ -142,8 +145,6 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
 
     def slide_accel(y, F, phi, s):
         load = model.load if v_s <= 0 else fx_stribeck(model.load, y[3], v_s)
-        if l_c > 0 and b_c > 0:
-            F += fx_cushion(y[2], y[3], L, l_c, b_c)
         return ph.sliding_acceleration(y[3], F, phi, s, load)
 
     cuts = sorted({float(b) for b in breakpoints if 0.0 < b < stop_time} | {stop_time})

@@ -19,6 +19,7 @@ Decisions carry margins against the recordings' own noise:
 """
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -37,7 +38,7 @@ CANDIDATES = {
     "heat_transfer": [("h", 1.0, 2000.0, True)],
     "piston_leakage": [("C", 1e-13, 5e-10, True)],
     "stribeck_friction": [("v_s", 2e-4, 0.1, True)],
-    "end_cushioning": [("length", 1e-3, 0.02, False), ("damping", 10.0, 3e4, True)],
+    "end_cushioning": [("length", 2e-3, 0.02, False), ("A_n", 1e-8, 4e-6, True)],
     "sensor_lag": [("tau", 2e-4, 0.03, True)],
 }
 NOISE_FACTOR = 3.0
@@ -102,15 +103,18 @@ def _unpack(spec, z):
     return {p: (10 ** v if log else v) for (p, lo, hi, log), v in zip(spec, z)}
 
 
-def fit_effects(names: list[str], values: dict, fit_recs) -> tuple[dict, float]:
+def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = None) -> tuple[dict, float]:
     """Fit the parameters of the effects ``names`` together on the fit recordings:
-    ``({name: {param: value}}, cost)``."""
+    ``({name: {param: value}}, cost)``.  One parameter: a bounded scalar search.  More:
+    Nelder-Mead from ``start`` (``{name: {param: value}}``, e.g. each effect's own fit),
+    or else from the best point of a coarse grid (4 levels per parameter), since the
+    cost of a two-parameter effect such as the cushion is a narrow valley."""
     spec = [(n, *s) for n in names for s in CANDIDATES[n]]
 
     def to_effects(z):
         out: dict = {}
         for (n, p, lo, hi, log), v in zip(spec, z):
-            out.setdefault(n, {})[p] = 10 ** v if log else v
+            out.setdefault(n, {})[p] = float(10 ** v if log else v)
         return out
 
     def cost(z):
@@ -123,7 +127,12 @@ def fit_effects(names: list[str], values: dict, fit_recs) -> tuple[dict, float]:
                               options={"xatol": 0.02 * (bounds[0][1] - bounds[0][0])})
         z, fun = [res.x], res.fun
     else:
-        z0 = [0.5 * (lo + hi) for lo, hi in bounds]
+        if start is not None:
+            z0 = [min(max(math.log10(start[n][p]) if log else start[n][p], b[0]), b[1])
+                  for (n, p, lo, hi, log), b in zip(spec, bounds)]
+        else:
+            levels = [np.linspace(lo, hi, 6)[1:-1] for lo, hi in bounds]
+            z0 = list(min(itertools.product(*levels), key=cost))
         res = minimize(cost, z0, method="Nelder-Mead", bounds=bounds,
                        options={"maxfev": 60, "xatol": 1e-3, "fatol": 1e-9})
         z, fun = res.x, res.fun
@@ -178,7 +187,8 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
             verdict = [best.name]
             if len(cands) > 1 and cands[1].shrink >= MIN_SHRINK_SECOND:
                 pair = [best.name, cands[1].name]
-                fx, cost = fit_effects(pair, values, fit_recs)
+                fx, cost = fit_effects(pair, values, fit_recs,
+                                       start={best.name: best.params, cands[1].name: cands[1].params})
                 after = mean_errors(values, fx, hold_recs)
                 shrink = 1.0 - sum(after.values()) / max(total_before, 1e-12)
                 if shrink >= best.shrink + PAIR_GAIN:

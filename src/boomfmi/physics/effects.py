@@ -19,8 +19,11 @@ heat_transfer (cylinder)     h        the air exchanges heat with the chamber's 
                                       touches (end faces and barrel)
 piston_leakage (cylinder)    C        laminar leak A -> B: C (p_a - p_b)          C = 0
 stribeck_friction (boom)     v_s      Coulomb level F_d + (F_s - F_d) e^(-|v|/v_s) v_s = 0
-end_cushioning (boom)        l_c, b   a damping force -b v within l_c of the end  l_c = 0
-                                      the piston moves towards, growing linearly
+end_cushioning (cylinder)    l_c, A_n within l_c of a chamber's end, its      l_c = 0
+                                      outflow passes the cushion needle (area
+                                      A_n, to the exhaust) in series with the
+                                      valve: 1/mdot^2 = 1/mdot_v^2 + 1/mdot_n^2;
+                                      inflow passes freely (check valve)
 sensor_lag (bridge)          tau      first-order lag of every measured channel   tau = 0
 ============================ ======== =========================================== ========
 """
@@ -28,7 +31,8 @@ from __future__ import annotations
 
 import math
 
-from .params import Load
+from .orifice import mass_flow
+from .params import Gas, Load
 
 
 def spool_lag_step(y: float, u: float, dt: float, tau: float) -> float:
@@ -92,16 +96,37 @@ def stribeck_load(load: Load, v: float, v_s: float) -> Load:
     return load._replace(F_d=load.F_d + (load.F_s - load.F_d) * math.exp(-abs(v) / v_s))
 
 
-def cushion_force(x: float, v: float, L: float, length: float, damping: float) -> float:
-    """End-of-stroke cushioning [N], positive extending: within ``length`` [m] of the
-    stop the piston moves towards, a damping force ``-damping v`` [N s/m] that grows
-    linearly from nothing at ``length`` to full at the stop."""
-    if length <= 0.0 or v == 0.0:
+def cushion_outflow(mdot: float, p: float, distance: float, length: float, A_n: float,
+                    P_e: float, gas: Gas = Gas()) -> float:
+    """End-of-stroke cushioning: a chamber's mass flow [kg/s] once the cushion acts on
+    the flow ``mdot`` [kg/s] the valve alone passes, the chamber at pressure ``p`` [Pa,
+    absolute] and the piston ``distance`` [m] from that chamber's end of stroke.
+
+    Within ``length`` [m] of the end the cushion spear closes the main exhaust and an
+    outflow (``mdot < 0``) must also pass the cushion needle, an orifice of area ``A_n``
+    [m^2] to the exhaust pressure ``P_e`` [Pa]; two restrictions in series pass
+    ``1/mdot^2 = 1/mdot_v^2 + g/mdot_n^2``, the spear's engagement ``g`` rising from 0
+    to 1 over the first fifth of ``length`` (so the flow is continuous in the position).
+    Inflow passes the cushion's check valve freely.  ``length <= 0``: off."""
+    if length <= 0.0 or mdot >= 0.0 or distance >= length:
+        return mdot
+    engaged = min(1.0, (length - max(distance, 0.0)) / (0.2 * length))
+    mdot_n = mass_flow(A_n, p, P_e, gas)
+    if mdot_n <= 0.0:
         return 0.0
-    distance = (L - x) if v > 0.0 else x
-    if distance >= length:
-        return 0.0
-    return -damping * v * (1.0 - max(distance, 0.0) / length)
+    return mdot / math.sqrt(1.0 + engaged * (mdot / mdot_n) ** 2)
+
+
+def cushion_outflow_slope(mdot: float, slope: float, p: float, distance: float, length: float,
+                          A_n: float, P_e: float, gas: Gas = Gas()) -> float:
+    """The slope [kg/(s Pa)] of :func:`cushion_outflow` with respect to ``p``, given the
+    valve's flow ``mdot`` and its slope ``slope`` (a central difference)."""
+    if length <= 0.0 or mdot >= 0.0 or distance >= length:
+        return slope
+    h = max(1.0, 1e-6 * p)
+    up = cushion_outflow(mdot + slope * h, p + h, distance, length, A_n, P_e, gas)
+    down = cushion_outflow(min(mdot - slope * h, -1e-300), p - h, distance, length, A_n, P_e, gas)
+    return min((up - down) / (2.0 * h), 0.0)
 
 
 def sensor_lag_step(measured: float, true: float, dt: float, tau: float) -> float:

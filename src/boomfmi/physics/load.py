@@ -128,7 +128,7 @@ def slide_or_stick(v: float, F_drive: float, cos_phi: float, dt: float,
 def advance_load(x: float, v: float, dt: float, p_a: float, p_b: float, f_ext: float,
                  cyl: Cylinder = Cylinder(), geom: Geometry = Geometry(),
                  load: Load = Load(), P_atm: float = 101_325.0,
-                 max_substep: float = 2e-4, load_at=None, force_at=None):
+                 max_substep: float = 2e-4, load_at=None):
     """Advance the boom ``dt`` [s] with held pressures and external force.
 
     Parameters
@@ -141,10 +141,9 @@ def advance_load(x: float, v: float, dt: float, p_a: float, p_b: float, f_ext: f
         External force [N] along the cylinder axis, positive against extension.
     max_substep : float
         Longest substep [s] over which phi (and so the load and friction) is frozen.
-    load_at, force_at : callables, optional
-        For effects that depend on the motion, evaluated at each substep's start and
-        frozen over it: ``load_at(load, v) -> Load`` (a friction level that varies with
-        speed) and ``force_at(x, v) -> N`` (a further force, positive extending).
+    load_at : callable, optional
+        For a friction level that varies with speed (stribeck_friction): ``load_at(load,
+        v) -> Load``, evaluated at each substep's start and frozen over it.
 
     Returns
     -------
@@ -157,7 +156,7 @@ def advance_load(x: float, v: float, dt: float, p_a: float, p_b: float, f_ext: f
     for _ in range(n):
         phi = phi_from_x(x, geom)
         ld = load if load_at is None else load_at(load, v)
-        F = F_p - ld.F_L * math.sin(phi) + (0.0 if force_at is None else force_at(x, v))
+        F = F_p - ld.F_L * math.sin(phi)
         dx, v = slide_or_stick(v, F, math.cos(phi), h, ld)
         x += dx
         if x <= 0.0:
