@@ -55,8 +55,8 @@ def draw_case(i: int, seed: int):
             effects[n]["F_brk"] = float(rng.uniform(1.2, 1.8) * params["F_s"])
     truth = sorted(names)
     if kind == "vibration":
-        disturbance = {"type": "vibration", "amplitude": float(rng.uniform(30, 60)),
-                       "frequency": float(rng.uniform(12, 30))}
+        disturbance = {"type": "vibration", "amplitude": float(rng.uniform(150, 300)),
+                       "frequency": float(rng.uniform(5, 15))}
         truth = ["unexplained"]
     return {"case": i, "kind": kind, "params": params, "effects": effects,
             "disturbance": disturbance, "truth": truth, "seed": seed * 1000 + i}
@@ -95,9 +95,10 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", type=int, default=30)
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--only", type=int, nargs="*", help="run only these case numbers (for a look at them)")
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "diagnosis.md")
     args = ap.parse_args(argv)
-    cases = [draw_case(i, args.seed) for i in range(args.cases)]
+    cases = [draw_case(i, args.seed) for i in (args.only or range(args.cases))]
     t0 = time.perf_counter()
     with ProcessPoolExecutor(args.workers) as pool:
         results = []

@@ -6,20 +6,23 @@ re-identified first (``identify.fit``), by output error of the whole model
 (``reference.simulate_reference`` with the effect on) on x, p_a and p_b, each residual
 normalised by its channel's range.  Each fitted candidate is then scored on the holdout
 recordings, which are never fitted on: ``shrink = 1 - (error after) / (error before)``,
-errors summed over the three channels.  The two best are also fitted together.
+errors summed over the three channels.  A second effect is fitted beside the best
+where the best leaves a gap.
 
 Decisions carry margins against the recordings' own noise:
 
 * no gap: the baseline's holdout error is within ``NOISE_FACTOR`` times the noise
   floor (each channel's noise over its range) plus ``ABS_FLOOR``: verdict ``[]``;
-* the best candidate shrinks the error by at least ``MIN_SHRINK``: it is the verdict,
-  joined by the second when the pair shrinks the error by ``PAIR_GAIN`` more than the
-  best alone and the second shrinks it by at least ``MIN_SHRINK_SECOND`` on its own;
+* the best candidate shrinks the error by at least ``MIN_SHRINK``: it is the verdict;
+  where the error it leaves is still beyond the noise, the next candidates are fitted
+  beside it, and the best of them joins the verdict when it removes at least
+  ``MIN_SHRINK_SECOND`` of that remaining error;
 * otherwise ``["unexplained"]``.
 """
 from __future__ import annotations
 
 import itertools
+import os
 import math
 from dataclasses import dataclass, field
 
@@ -44,10 +47,10 @@ CANDIDATES = {
 NOISE_FACTOR = 3.0
 ABS_FLOOR = 0.002
 MIN_SHRINK = 0.35
-MIN_SHRINK_SECOND = 0.2
-PAIR_GAIN = 0.1
-RTOL = 1e-6            #: the reference solver's tolerance when scoring
-FIT_RTOL = 1e-5        #: and while fitting (each fit runs the model a dozen times or more)
+MIN_SHRINK_SECOND = 0.4     #: the share of the gap left by the best that a second effect must remove
+PAIR_TRIES = 3              #: the candidates tried as a second effect
+RTOL = 1e-5            #: the reference solver's tolerance when scoring
+FIT_RTOL = 1e-4        #: and while fitting (each fit runs the model a dozen times or more)
 
 
 def errors(values: dict, effects: dict, rec, rtol: float = RTOL) -> dict:
@@ -103,16 +106,18 @@ def _unpack(spec, z):
     return {p: (10 ** v if log else v) for (p, lo, hi, log), v in zip(spec, z)}
 
 
-def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = None) -> tuple[dict, float]:
+def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = None,
+                fixed: dict | None = None) -> tuple[dict, float]:
     """Fit the parameters of the effects ``names`` together on the fit recordings:
     ``({name: {param: value}}, cost)``.  One parameter: a bounded scalar search.  More:
     Nelder-Mead from ``start`` (``{name: {param: value}}``, e.g. each effect's own fit),
     or else from the best point of a coarse grid (4 levels per parameter), since the
-    cost of a two-parameter effect such as the cushion is a narrow valley."""
+    cost of a two-parameter effect such as the cushion is a narrow valley.  ``fixed``:
+    further effects switched on with their parameters held (returned with the fit)."""
     spec = [(n, *s) for n in names for s in CANDIDATES[n]]
 
     def to_effects(z):
-        out: dict = {}
+        out: dict = {n: dict(p) for n, p in (fixed or {}).items()}
         for (n, p, lo, hi, log), v in zip(spec, z):
             out.setdefault(n, {})[p] = float(10 ** v if log else v)
         return out
@@ -149,29 +154,30 @@ class Attribution:
 
 
 def _fit_and_score(args):
-    name, values, fit_recs, hold_recs = args
-    fx, cost = fit_effects([name], values, fit_recs)
+    name, values, fit_recs, hold_recs, fixed = args
+    fx, cost = fit_effects([name], values, fit_recs, fixed=fixed)
     return name, fx, cost, mean_errors(values, fx, hold_recs)
+
+
+def _map(fn, jobs, workers):
+    if workers > 1 and len(jobs) > 1:
+        from concurrent.futures import ProcessPoolExecutor
+        with ProcessPoolExecutor(min(workers, len(jobs))) as pool:
+            return list(pool.map(fn, jobs))
+    return [fn(j) for j in jobs]
 
 
 def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None = None) -> Attribution:
     """Fit, score and rank the candidates (``workers`` processes at once; default: one
     per core); decide the verdict."""
-    import os
     names = list(CANDIDATES) if names is None else names
     before = mean_errors(values, {}, hold_recs)
     floors = [noise_floor(r) for r in hold_recs]
     noise = {c: float(np.mean([f[c] for f in floors])) for c in CHANNELS}
     total_before = sum(before.values())
     gap = total_before > NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR
-    jobs = [(n, values, fit_recs, hold_recs) for n in names]
     workers = workers or os.cpu_count() or 1
-    if workers > 1:
-        from concurrent.futures import ProcessPoolExecutor
-        with ProcessPoolExecutor(min(workers, len(jobs))) as pool:
-            fitted = list(pool.map(_fit_and_score, jobs))
-    else:
-        fitted = [_fit_and_score(j) for j in jobs]
+    fitted = _map(_fit_and_score, [(n, values, fit_recs, hold_recs, None) for n in names], workers)
     cands = [Candidate(n, fx[n], cost, after, 1.0 - sum(after.values()) / max(total_before, 1e-12))
              for n, fx, cost, after in fitted]
     cands.sort(key=lambda c: -c.shrink)
@@ -185,16 +191,31 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
         best = cands[0]
         if best.shrink >= MIN_SHRINK:
             verdict = [best.name]
-            if len(cands) > 1 and cands[1].shrink >= MIN_SHRINK_SECOND:
-                pair = [best.name, cands[1].name]
-                fx, cost = fit_effects(pair, values, fit_recs,
-                                       start={best.name: best.params, cands[1].name: cands[1].params})
-                after = mean_errors(values, fx, hold_recs)
-                shrink = 1.0 - sum(after.values()) / max(total_before, 1e-12)
-                if shrink >= best.shrink + PAIR_GAIN:
-                    verdict = pair
-                    cands.insert(0, Candidate("+".join(pair), fx, cost, after, shrink,
-                                              round(best_strength, 4)))
+            pair = _second_effect(best, cands[1:], values, fit_recs, hold_recs, total_before,
+                                  NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR, workers)
+            if pair is not None:
+                pair.score = round(best_strength, 4)
+                verdict = pair.name.split("+")
+                cands.insert(0, pair)
         else:
             verdict = ["unexplained"]
     return Attribution(before, noise, gap, cands, verdict)
+
+
+def _second_effect(best, others, values, fit_recs, hold_recs, total_before, threshold, workers):
+    """A second effect beside ``best``, where the gap left by ``best`` alone is still
+    beyond the noise: each of the next candidates that helped on its own is fitted with
+    ``best`` held on; the pair is kept when the second removes at least
+    ``MIN_SHRINK_SECOND`` of what ``best`` left (on the holdout recordings)."""
+    left = sum(best.holdout.values())
+    if left <= threshold:
+        return None
+    seconds = [c.name for c in others if c.shrink > 0.0][:PAIR_TRIES]
+    fixed = {best.name: best.params}
+    fitted = _map(_fit_and_score, [(n, values, fit_recs, hold_recs, fixed) for n in seconds], workers)
+    pairs = [Candidate(f"{best.name}+{n}", fx, cost, after, 1.0 - sum(after.values()) / max(total_before, 1e-12))
+             for n, fx, cost, after in fitted]
+    if not pairs:
+        return None
+    top = max(pairs, key=lambda c: c.shrink)
+    return top if 1.0 - sum(top.holdout.values()) / left >= MIN_SHRINK_SECOND else None
