@@ -43,7 +43,7 @@ def main(argv=None) -> int:
         if set(args.names) == set(FMU_NAMES):
             from boomfmi.fmubuild.ssp import pack_ssp, write_reference_parameters
             if args.write_references:
-                print(f"wrote {write_reference_parameters(HERE / 'ssp' / 'SystemStructure.ssd', args.out / 'fmus', HERE / 'ssp' / 'reference_rig.ssv')}")
+                print(f"wrote {write_reference_parameters([HERE / 'ssp' / ssd for ssd in SSPS.values()], args.out / 'fmus', HERE / 'ssp' / 'reference_rig.ssv')}")
             for name, ssd in SSPS.items():
                 print(f"packed {pack_ssp(HERE / 'ssp' / ssd, args.out / 'fmus', args.out / f'{name}.ssp')}")
     except BuildError as e:

@@ -1,51 +1,113 @@
-"""force_estimator: the paper's position-error force estimator and the joystick force.
+"""force_estimator: the external (digging) force on the boom, and the joystick's force.
 
-Inputs the model's and the machine's piston positions and velocities; outputs the
-estimated external force ``f_est = K_p (x_model - x_measured) + D (v_model - v_measured)``
-(positive against extension, like f_ext) and ``f_reflect``, the joystick force command:
-``gain * f_est`` saturated to +-f_max and rate-limited to rate_max, updated once per
-communication step.
+Two methods (parameter ``method``), both giving ``f_est`` positive against extension,
+like f_ext (``physics/force_estimation.py``):
+
+* ``position_error`` (the paper's): ``K (x_model - x_measured) + D (v_model -
+  v_measured)``, K the model's pneumatic stiffness k (p_a A_a^2/V_a + p_b A_b^2/V_b) at
+  its current pressures and position (``K_p`` = 0), or a calibrated ``K_p`` > 0;
+* ``observer``: Eq. 8 read backwards from the machine's measured pressures and motion
+  with the identified load parameters; at rest only the force that static friction
+  cannot hold is reported.
+
+The measured position passes a critically damped second-order filter (``f_motion``)
+that gives the machine's velocity (output ``v_measured``, the mean over the last
+step) and acceleration; the
+estimate then passes a first-order low-pass (``tau_est``).  ``f_reflect``, the
+joystick's force command, is ``gain * f_est`` saturated to +-``f_max`` and rate-limited
+to ``rate_max``.  All outputs are states, updated once per communication step from the
+inputs held over it (no direct feedthrough, so no algebraic loop in any coupling).
 """
+import math
+
 from boomfmi_force_estimator_lib.fmislave import BoomSlave, input, output, parameter
-from boomfmi_force_estimator_lib.physics import position_error_force, reflected_force
+from boomfmi_force_estimator_lib.physics import (Cylinder, Gas, Geometry, Load, ParameterError,
+                                                 check_cylinder, check_gas, check_geometry, check_load,
+                                                 motion_filter_step, low_pass_step,
+                                                 observed_external_force, pneumatic_stiffness,
+                                                 position_error_force, reflected_force)
+from boomfmi_force_estimator_lib.physics import reference_rig as rig
 from boomfmi_force_estimator_lib.physics.validation import require_non_negative, require_positive
+
+METHODS = ("position_error", "observer")
 
 
 class ForceEstimator(BoomSlave):
-    description = "Position-error force estimation and joystick force reflection (paper Sec. 2)"
+    description = "External force estimation (the paper's position error, or a load observer) and joystick force reflection"
     variables = (
-        input("x_model", 0.0, "m", "piston position of the model"),
+        input("x_model", 0.0, "m", "position_error: piston position of the model"),
+        input("v_model", 0.0, "m/s", "position_error: piston velocity of the model"),
+        input("p_a_model", rig.P_atm, "Pa", "position_error: absolute chamber A pressure of the model (its stiffness)", min=0.0),
+        input("p_b_model", rig.P_atm, "Pa", "position_error: absolute chamber B pressure of the model (its stiffness)", min=0.0),
         input("x_measured", 0.0, "m", "piston position of the machine"),
-        input("v_model", 0.0, "m/s", "piston velocity of the model"),
-        input("v_measured", 0.0, "m/s", "piston velocity of the machine"),
-        output("f_est", 0.0, "N", "estimated external force on the piston, positive against extension",
-               depends=("x_model", "x_measured", "v_model", "v_measured")),
+        input("p_a_measured", 0.0, "Pa", "observer: measured chamber A pressure, gauge (as the bridge gives it)"),
+        input("p_b_measured", 0.0, "Pa", "observer: measured chamber B pressure, gauge (as the bridge gives it)"),
+        output("f_est", 0.0, "N", "estimated external force on the piston, positive against extension"),
         output("f_reflect", 0.0, "N", "joystick force command: gain * f_est, saturated and rate-limited"),
-        parameter("K_p", 2.0e4, "N/m", "position-error gain; default: the pneumatic stiffness "
-                  "k (p_a A_a^2/V_a + p_b A_b^2/V_b) of the reference rig extending at mid-stroke", min=0.0),
-        parameter("D", 2829.0, "N.s/m", "velocity-error gain; default: the viscous friction K_v", min=0.0),
+        output("v_measured", 0.0, "m/s", "the machine's piston velocity, from the filtered measured position"),
+        parameter("method", "observer", "1", "position_error (the paper's) or observer", type="String"),
+        parameter("K_p", 0.0, "N/m", "position_error: calibrated stiffness; 0: the model's pneumatic stiffness at its state", min=0.0),
+        parameter("D", rig.K_v, "N.s/m", "position_error: velocity-error gain; default the viscous friction K_v", min=0.0),
+        parameter("f_motion", 40.0, "Hz", "corner frequency of the critically damped filter of the measured position", min=0.0),
+        parameter("tau_est", 0.004, "s", "time constant of the estimate's low-pass; 0: none", min=0.0),
+        parameter("v_rest", 2e-3, "m/s", "observer: below this filtered speed the piston counts as at rest", min=0.0),
         parameter("gain", 0.05, "1", "joystick force per estimated force", min=0.0),
         parameter("f_max", 20.0, "N", "joystick force saturation", min=0.0),
         parameter("rate_max", 500.0, "N/s", "joystick force rate limit", min=0.0),
+        parameter("K_v", rig.K_v, "N.s/m", "viscous friction coefficient", min=0.0),
+        parameter("F_s", rig.F_s, "N", "static friction force", min=0.0),
+        parameter("F_d", rig.F_d, "N", "Coulomb friction force", min=0.0),
+        parameter("F_L", rig.F_L, "N", "load force from the backhoe's weight, acting as F_L sin(phi)"),
+        parameter("M", rig.M, "kg", "moving mass reduced to the piston", min=0.0),
+        parameter("A_a", rig.A_a, "m2", "cap-side piston area", min=0.0),
+        parameter("A_b", rig.A_b, "m2", "rod-side annulus area", min=0.0),
+        parameter("L", rig.L, "m", "stroke", min=0.0),
+        parameter("V_a0", rig.V_a0, "m3", "dead volume of chamber A incl. port and hose", min=0.0),
+        parameter("V_b0", rig.V_b0, "m3", "dead volume of chamber B incl. port and hose", min=0.0),
+        parameter("k", rig.k, "1", "ratio of specific heats of air", min=1.0),
+        parameter("P_atm", rig.P_atm, "Pa", "atmospheric pressure", min=0.0),
+        parameter("a", rig.a, "m", "boom geometry a (Eq. 10, 12)", min=0.0),
+        parameter("b", rig.b, "m", "boom geometry b (Eq. 10, 12)", min=0.0),
+        parameter("h", rig.h, "m", "boom geometry h (Eq. 10)", min=0.0),
+        parameter("l_min", rig.l_min, "m", "cylinder length at x = 0 (Eq. 11)", min=0.0),
     )
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self.modelName = "force_estimator"
+        self._started = False
 
     def setup(self):
-        require_non_negative("K_p", self.K_p)
-        require_non_negative("D", self.D)
-        require_non_negative("gain", self.gain)
-        require_positive("f_max", self.f_max)
-        require_positive("rate_max", self.rate_max)
-        self.f_reflect = 0.0
-
-    @property
-    def f_est(self):
-        return position_error_force(self.x_model, self.x_measured, self.v_model,
-                                    self.v_measured, self.K_p, self.D)
+        if self.method not in METHODS:
+            raise ParameterError("method", self.method, "must be 'position_error' or 'observer'")
+        for name in ("K_p", "D", "tau_est", "v_rest", "gain"):
+            require_non_negative(name, getattr(self, name))
+        for name in ("f_motion", "f_max", "rate_max", "P_atm"):
+            require_positive(name, getattr(self, name))
+        self._cyl = Cylinder(A_a=self.A_a, A_b=self.A_b, L=self.L, V_a0=self.V_a0, V_b0=self.V_b0)
+        self._gas = Gas(k=self.k)
+        self._geom = Geometry(a=self.a, b=self.b, h=self.h, l_min=self.l_min)
+        self._load = Load(K_v=self.K_v, F_s=self.F_s, F_d=self.F_d, F_L=self.F_L, M=self.M)
+        check_cylinder(self._cyl)
+        check_gas(self._gas)
+        check_geometry(self._geom, self.L)
+        check_load(self._load)
+        self._omega = 2.0 * math.pi * self.f_motion
+        self.f_est = self.f_reflect = self.v_measured = 0.0
+        self._started = False
 
     def step(self, t, dt):
-        self.f_reflect = reflected_force(self.f_est, self.f_reflect, dt, self.gain,
-                                         self.f_max, self.rate_max)
+        if not self._started:               # the filter starts at rest at the first measurement
+            self._x_f, self._v_f, self._started = self.x_measured, 0.0, True
+        self._x_f, self._v_f, self.v_measured, a = motion_filter_step(self._x_f, self._v_f, self.x_measured,
+                                                                      dt, self._omega)
+        if self.method == "observer":
+            force = observed_external_force(self.p_a_measured + self.P_atm, self.p_b_measured + self.P_atm,
+                                            self.x_measured, self.v_measured, a, self._cyl, self._geom,
+                                            self._load, self.P_atm, self.v_rest)
+        else:
+            x_m = min(max(self.x_model, 0.0), self.L)
+            K = self.K_p or pneumatic_stiffness(self.p_a_model, self.p_b_model, x_m, self._cyl, self._gas)
+            force = position_error_force(self.x_model, self.x_measured, self.v_model, self.v_measured, K, self.D)
+        self.f_est = low_pass_step(self.f_est, force, dt, self.tau_est)
+        self.f_reflect = reflected_force(self.f_est, self.f_reflect, dt, self.gain, self.f_max, self.rate_max)

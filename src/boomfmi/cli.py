@@ -1,7 +1,8 @@
 """The ``boomfmi`` command: a thin layer over the library.
 
     boomfmi simulate SSP --experiment paper_multistep|RUN.csv [--step 0.001] [--stop 9]
-                         [--params params.ssv] [--algorithm gauss-seidel|jacobi] --out result.csv
+                         [--params params.ssv] [--set NAME=VALUE] [--replay | --rig udp://HOST:PORT]
+                         [--algorithm gauss-seidel|jacobi] --out result.csv
     boomfmi rig serve --port P [--lockstep] [--record FILE] [--config rig.json] [--key-file K]
     boomfmi record --experiment paper_multistep --rig udp://127.0.0.1:P --out run.csv [--key-file K]
     boomfmi identify RUN.csv [RUN.csv ...] [--method paper|fit] [--a-max] [--holdout H.csv] --out params.json
@@ -50,10 +51,34 @@ def _check(args) -> int:
     return 1 if failures else 0
 
 
+def _value(text: str):
+    """A ``--set`` value: an integer, a real, true/false, or else a string."""
+    for cast in (int, float):
+        try:
+            return cast(text)
+        except ValueError:
+            pass
+    return {"true": True, "false": False}.get(text.lower(), text)
+
+
 def _simulate(args) -> int:
     from .simulate import run_experiment
+    given = {}
+    for item in args.set:
+        name, eq, value = item.partition("=")
+        if not eq or "." not in name:
+            raise ValueError(f"--set {item!r}: expected COMPONENT.PARAMETER=VALUE")
+        given[name] = _value(value)
+    if args.replay:
+        if not args.experiment.lower().endswith(".csv"):
+            raise ValueError("--replay plays the experiment's recording through the hardware bridge: "
+                             "give --experiment RUN.csv")
+        from .simulate import replay_parameters
+        given = {**replay_parameters(args.experiment), **given}
+    if args.rig:
+        given.update({"hardware_bridge.mode": "udp", "hardware_bridge.rig": args.rig})
     result = run_experiment(args.ssp, args.experiment, args.step, args.stop, args.algorithm,
-                            args.params, progress=True)
+                            [*args.params, given] if given else args.params, progress=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     result.to_csv(args.out, index=False, float_format="%.10g")
     last = result.iloc[-1]
@@ -134,6 +159,13 @@ def main(argv=None) -> int:
     p.add_argument("--stop", type=float, default=None, help="stop time [s] (default: the experiment's end)")
     p.add_argument("--params", type=Path, action="append", default=[],
                    help="a parameter set (.ssv, names like valve.A_max) applied after the SSP's own; repeatable")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="set one parameter, e.g. force_estimator.method=position_error (after --params)")
+    link = p.add_mutually_exclusive_group()
+    link.add_argument("--replay", action="store_true",
+                      help="teleoperation: the hardware bridge replays the experiment's recording")
+    link.add_argument("--rig", help="teleoperation: the hardware bridge talks to the rig at udp://HOST:PORT "
+                                    "(a lockstep or real-time `boomfmi rig serve`)")
     p.add_argument("--algorithm", choices=("gauss-seidel", "jacobi"), default="gauss-seidel")
     p.add_argument("--out", type=Path, required=True, help="output CSV (recording columns plus x, v)")
     p.set_defaults(run=_simulate)

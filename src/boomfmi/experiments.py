@@ -60,8 +60,32 @@ def random_steps(seed: int = 0, duration: float = 12.0, hold=(0.15, 0.8)) -> Cal
     return profile
 
 
+def held(segments) -> Callable[[float], dict]:
+    """Commands held over consecutive segments: ``[(duration [s], u [V]), ...]``."""
+    import numpy as np
+    starts = np.concatenate(([0.0], np.cumsum([d for d, _ in segments])[:-1]))
+    levels = [float(u) for _, u in segments]
+
+    def profile(t: float) -> dict:
+        return {"u": levels[max(0, int(np.searchsorted(starts, t, side="right")) - 1)]}
+    profile.duration = float(sum(d for d, _ in segments))
+    profile.breakpoints = [float(s) for s in starts[1:]]
+    return profile
+
+
+def dig() -> Callable[[float], dict]:
+    """An operator's digging cycle for force estimation (teleoperation), 10 s, from the
+    boom held at mid-stroke (x0 = 50 mm in the contact scenarios): lower it gently into
+    the ground and hold, raise it a little, lower it harder and press, hold, raise it,
+    lower it again and raise it.  The bucket meets the ground of a contact scenario
+    (the virtual rig's ``contact``: ``examples/rig/contact_soft.json`` at x = 45 mm,
+    ``contact_hard.json`` at 30 mm) on the way down."""
+    return held([(0.5, 5.0), (1.5, 6.3), (1.0, 5.0), (0.25, 3.0), (0.75, 5.0), (1.5, 6.8),
+                 (1.0, 5.0), (0.3, 3.0), (0.7, 5.0), (1.5, 6.3), (1.0, 3.5)])
+
+
 PROFILES = {"paper_multistep": paper_multistep, "holdout_multistep": holdout_multistep,
-            "random_steps": random_steps}
+            "random_steps": random_steps, "dig": dig}
 
 
 def profile(name: str) -> Callable[[float], dict]:

@@ -8,7 +8,9 @@ the columns of a recording (``t, u, p_a, p_b, alpha``, gauge pressures) plus ``x
 are found by name among the model components' outputs (``p_a`` is the one output
 called ``p_a``), not wired here.  Where the system holds a hardware bridge, its
 measurements follow as ``p_a_measured``, ``p_b_measured``, ``alpha_measured``,
-``x_measured``, ``u_applied`` and the link's ``link_ok``, ``failsafe``, ``lost_packets``.
+``x_measured``, ``u_applied``, the rig's true ``f_ext`` where it knows it, and the
+link's ``link_ok``, ``failsafe``, ``lost_packets``, ``deadline_misses``; where it holds a
+force estimator, its ``f_est`` and ``f_reflect``.
 """
 from __future__ import annotations
 
@@ -41,6 +43,18 @@ def rig_parameters(experiment: str, parameters: dict) -> dict:
     over = read_recording(experiment).rig_values()
     return {f"{comp}.{name}": value for name, value in over.items()
             for comp, names in parameters.items() if name in names}
+
+
+def replay_parameters(recording) -> dict:
+    """The teleoperation system's parameters for replaying ``recording`` through its
+    hardware bridge: replay mode, the file, and the model starting where the machine
+    starts (``boom_load.x0`` from the recording's first angle)."""
+    from .physics import Geometry, x_from_alpha
+    rec = read_recording(recording)
+    geom = Geometry(**{k: v for k, v in rec.rig_values().items() if k in Geometry._fields})
+    x0 = min(max(float(x_from_alpha(float(rec.data["alpha"].iloc[0]), geom)), 0.0), rig.L)
+    return {"hardware_bridge.mode": "replay", "hardware_bridge.recording": str(recording),
+            "boom_load.x0": x0}
 
 
 def experiment_inputs(experiment: str, input_names: list[str]):
@@ -93,7 +107,11 @@ def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
         for name in ("p_a", "p_b", "alpha", "x"):
             out[f"{name}_measured"] = result[f"{bridge}.{name}"]
         out["u_applied"] = result[f"{bridge}.u_applied"]
-        for name in ("link_ok", "failsafe", "lost_packets"):
+        for name in ("f_ext", "link_ok", "failsafe", "lost_packets", "deadline_misses"):
             if f"{bridge}.{name}" in result:
                 out[name] = result[f"{bridge}.{name}"]
+    for name in ("f_est", "f_reflect"):
+        hits = [c for c in result.columns if c.count(".") == 1 and c.rpartition(".")[2] == name]
+        if hits:
+            out[name] = result[hits[0]]
     return out

@@ -40,10 +40,14 @@ def _boom_load() -> pd.DataFrame:
 
 
 def _force_estimator() -> pd.DataFrame:
+    """The machine extending at 50 mm/s as its chamber A pressure rises (the default
+    observer method), the model drawing ahead of it."""
     t = np.arange(0.0, 0.2001, 1e-3)
-    x_model = 0.001 * t / 0.2 * 10
-    return pd.DataFrame({"time": t, "x_model": x_model, "x_measured": 0.8 * x_model,
-                         "v_model": np.full_like(t, 0.05), "v_measured": np.full_like(t, 0.04)})
+    x_measured = 0.02 + 0.05 * t
+    return pd.DataFrame({"time": t, "x_model": x_measured + 0.01 * t, "v_model": np.full_like(t, 0.06),
+                         "p_a_model": 4e5 + 2e5 * t, "p_b_model": np.full_like(t, 2e5),
+                         "x_measured": x_measured, "p_a_measured": 3e5 + 2e5 * t,
+                         "p_b_measured": np.full_like(t, 1e5)})
 
 
 INPUTS = {"valve": _valve, "cylinder": _cylinder, "boom_load": _boom_load,

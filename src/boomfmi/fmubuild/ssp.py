@@ -82,13 +82,16 @@ def pack_ssp(ssd: Path, fmu_dir: Path, out: Path) -> Path:
     return out
 
 
-def write_reference_parameters(ssd: Path, fmu_dir: Path, out: Path) -> Path:
-    """Write the reference rig's parameter set for the components of ``ssd``: every
-    parameter of every component FMU at its default value (the reference rig's)."""
+def write_reference_parameters(ssds: list[Path], fmu_dir: Path, out: Path) -> Path:
+    """Write the reference rig's parameter set for the components of ``ssds`` that bind
+    it: every parameter of every such component FMU at its default value (the
+    reference rig's)."""
     from fmpy import read_model_description
-    root = ET.parse(ssd).getroot()
     params: dict[str, tuple[float, str | None]] = {}
-    for comp in root.iter(f"{{{NS['ssd']}}}Component"):
+    comps = [c for ssd in ssds for c in ET.parse(ssd).getroot().iter(f"{{{NS['ssd']}}}Component")
+             if any(b.get("source", "").startswith("resources/reference_rig_")
+                    for b in c.iter(f"{{{NS['ssd']}}}ParameterBinding"))]
+    for comp in comps:
         name = comp.get("name")
         fmu = Path(fmu_dir) / comp.get("source").removeprefix("resources/")
         md = read_model_description(str(fmu))

@@ -11,6 +11,7 @@ import math
 UNITS: dict[str, tuple[dict[str, int], dict[str, tuple[float, float]]]] = {
     "1": ({}, {}),
     "s": ({"s": 1}, {"ms": (1e3, 0.0)}),
+    "Hz": ({"s": -1}, {}),
     "m": ({"m": 1}, {"mm": (1e3, 0.0)}),
     "m/s": ({"m": 1, "s": -1}, {"mm/s": (1e3, 0.0)}),
     "m2": ({"m": 2}, {"mm2": (1e6, 0.0)}),

@@ -7,7 +7,8 @@ name of that FMU's own.
 """
 from . import effects, reference_rig
 from .chamber import chamber_inflows, chamber_pressure_step, chamber_volumes, pressure_rates
-from .force_estimation import pneumatic_stiffness, position_error_force, reflected_force
+from .force_estimation import (low_pass_step, motion_filter_step, observed_external_force,
+                               pneumatic_stiffness, position_error_force, reflected_force)
 from .geometry import alpha_from_x, check_geometry, cylinder_length, phi_from_x, x_from_alpha
 from .load import (acceleration, advance_load, drive_force, friction_force, piston_force,
                    slide_or_stick, sliding_acceleration)
@@ -20,7 +21,8 @@ from .valve import chamber_flow_slopes, chamber_flows, orifice_area
 
 __all__ = [
     "effects", "reference_rig", "chamber_pressure_step", "chamber_volumes", "pressure_rates",
-    "pneumatic_stiffness", "position_error_force", "reflected_force", "alpha_from_x",
+    "pneumatic_stiffness", "position_error_force", "reflected_force", "low_pass_step",
+    "motion_filter_step", "observed_external_force", "alpha_from_x",
     "check_geometry", "cylinder_length", "phi_from_x", "x_from_alpha", "acceleration",
     "advance_load", "drive_force", "friction_force", "piston_force", "slide_or_stick",
     "critical_pressure_ratio", "mass_flow", "signed_mass_flow", "Cylinder", "Gas",

@@ -223,5 +223,8 @@ def check_against_fmus(structure: SystemStructure, model_descriptions: dict) -> 
         if var.causality not in ("parameter", "input"):
             raise SspError(f"{origin}: parameter {name}: {element}.{var_name} is an {var.causality}, "
                            f"not a parameter")
+        if var.type == "Real" and p.type == "Integer":      # an integer is a valid real
+            structure.parameters[name] = p._replace(type="Real", value=float(p.value))
+            continue
         if var.type != p.type and not (var.type == "Enumeration" and p.type == "Integer"):
             raise SspError(f"{origin}: parameter {name} is given as {p.type}, the FMU declares {var.type}")
