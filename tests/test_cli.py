@@ -62,3 +62,22 @@ def test_a_recordings_sidecar_reaches_the_model(ssp_path, tmp_path):
     out = tmp_path / "model.csv"
     assert main(["simulate", str(ssp_path), "--experiment", str(tmp_path / "run.csv"), "--out", str(out)]) == 0
     assert read_recording(out).data["p_a"].iloc[-1] == pytest.approx(5.0e5, rel=5e-3)   # not 6 bar
+
+
+def test_simulate_teleoperation_replay_with_a_parameter_set_on_the_command_line(ssp_path, tmp_path):
+    """--replay plays the experiment's recording through the bridge, the model starting
+    where it starts; --set picks the paper's estimator (an integer given for a real)."""
+    from boomfmi.experiments import held
+    from boomfmi.rig.offline import run_offline
+    prof = held([(0.2, 5.0), (0.3, 3.5)])
+    run = write_recording(tmp_path / "run.csv", run_offline({"x0": 0.02, "seed": 1}, prof, prof.duration))
+    out = tmp_path / "tele.csv"
+    assert main(["simulate", str(ssp_path.parent / "teleoperation.ssp"), "--experiment", str(run), "--replay",
+                 "--set", "force_estimator.method=position_error", "--set", "force_estimator.K_p=20000",
+                 "--out", str(out)]) == 0
+    got = pd.read_csv(out, comment="#")
+    assert {"x_measured", "f_ext", "f_est", "f_reflect"} <= set(got.columns)
+    assert got["x"].iloc[0] == pytest.approx(got["x_measured"].iloc[0], abs=1e-4)
+    assert np.all(got["link_ok"].iloc[:-1])
+    assert main(["simulate", str(ssp_path.parent / "teleoperation.ssp"), "--experiment", "dig", "--replay",
+                 "--out", str(out)]) == 1            # --replay needs a recording: a one-line error
