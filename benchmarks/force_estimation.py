@@ -120,8 +120,10 @@ def main(argv=None) -> int:
              "|---|---|---|---|---|---|---|"]
     for label, method, f in rows:
         if f["peak"] > 0:
+            at_bound = abs(f["lag"]) >= 0.299
+            lag_text = f"beyond +-300 ms (no peak)" if at_bound else f"{1e3 * f['lag']:.0f} ms"
             lines.append(f"| {label} | {method} | {f['peak']:.0f} N | {100 * f['rmse'] / f['peak']:.1f} % | "
-                         f"{1e3 * f['lag']:.0f} ms | {100 * f['false'] / f['peak']:.1f} % | {100 * f['judged']:.0f} % |")
+                         f"{lag_text} | {100 * f['false'] / f['peak']:.1f} % | {100 * f['judged']:.0f} % |")
         else:
             lines.append(f"| {label} | {method} | none | | | {f['false']:.1f} N RMS | {100 * f['judged']:.0f} % |")
     obs = [f for _, m, f in rows if m == "observer" and f["peak"] > 0]
