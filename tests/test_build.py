@@ -79,20 +79,25 @@ def test_all_four_run_together_without_boomfmi(clean_build, tmp_path):
         from fmpy import extract, read_model_description
         from fmpy.fmi2 import FMU2Slave
 
-        def load(name):
+        def load(name, strings={{}}, reals={{}}):
             path = {str(clean_build)!r} + "/" + name + ".fmu"
             md = read_model_description(path)
             fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path),
                             modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+            vr = {{v.name: v.valueReference for v in md.modelVariables}}
             fmu.instantiate()
             fmu.setupExperiment(startTime=0.0)
             fmu.enterInitializationMode()
+            for n, value in strings.items():
+                fmu.setString([vr[n]], [value])
+            for n, value in reals.items():
+                fmu.setReal([vr[n]], [value])
             fmu.exitInitializationMode()
-            vr = {{v.name: v.valueReference for v in md.modelVariables}}
             return fmu, vr
 
         valve, vv = load("valve"); cyl, cv = load("cylinder")
-        boom, bv = load("boom_load"); est, ev = load("force_estimator")
+        boom, bv = load("boom_load")
+        est, ev = load("force_estimator", {{"method": "position_error"}}, {{"K_p": 2e4, "D": 0.0, "tau_est": 0.0}})
         for mod in ("valve", "cylinder", "boom_load", "force_estimator"):
             assert "boomfmi_" + mod + "_lib" in sys.modules, mod
         assert "boomfmi" not in sys.modules
@@ -111,7 +116,8 @@ def test_all_four_run_together_without_boomfmi(clean_build, tmp_path):
             t += dt
             p_a, p_b = cyl.getReal([cv["p_a"], cv["p_b"]])
             x, v = boom.getReal([bv["x"], bv["v"]])
-        est.setReal([ev["x_model"], ev["x_measured"]], [x, x - 1e-3])
+        est.setReal([ev["x_model"], ev["x_measured"], ev["v_model"]], [x, x - 1e-3, 0.0])
+        est.doStep(currentCommunicationPoint=t, communicationStepSize=dt)
         f_est = est.getReal([ev["f_est"]])[0]
         print(x, p_a - 101325.0, f_est)
         for f in (valve, cyl, boom, est):
