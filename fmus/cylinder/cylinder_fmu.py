@@ -79,6 +79,8 @@ class Cylinder(BoomSlave):
         V_a, V_b = chamber_volumes(min(max(self.x, 0.0), self.L), self._cyl)
         RT = self.R * self.T
         self._m_a, self._m_b = self.p_a * V_a / RT, self.p_b * V_b / RT    # air masses [kg]
+        self._bore = math.sqrt(4.0 * self.A_a / math.pi)
+        self._cushion = (self.l_cushion, self.A_cushion, self.P_e, self._gas)
 
     def step(self, t, dt):
         L = self._cyl.L
@@ -89,7 +91,7 @@ class Cylinder(BoomSlave):
         mdot_a, mdot_b = self.mdot_a, self.mdot_b
         s_a, s_b = min(self.dmdot_a_dp_a, 0.0), min(self.dmdot_b_dp_b, 0.0)
         if self.l_cushion > 0.0:
-            cushion = (self.l_cushion, self.A_cushion, self.P_e, self._gas)
+            cushion = self._cushion
             s_a = cushion_outflow_slope(mdot_a, s_a, self.p_a, x_0, *cushion)
             s_b = cushion_outflow_slope(mdot_b, s_b, self.p_b, L - x_0, *cushion)
             mdot_a = cushion_outflow(mdot_a, self.p_a, x_0, *cushion)
@@ -102,9 +104,8 @@ class Cylinder(BoomSlave):
         if self.h_wall > 0.0:
             self._m_a += dt * (mdot_a + 0.5 * s_a * (p_a - self.p_a))
             self._m_b += dt * (mdot_b + 0.5 * s_b * (p_b - self.p_b))
-            bore = (4.0 * self.A_a / math.pi) ** 0.5
             for side, m, V, A in (("a", self._m_a, V_a1, self.A_a), ("b", self._m_b, V_b1, self.A_b)):
-                tau = thermal_time_constant(m, chamber_wall_area(V, A, bore), self.h_wall, self.k, self.R)
+                tau = thermal_time_constant(m, chamber_wall_area(V, A, self._bore), self.h_wall, self.k, self.R)
                 if side == "a":
                     p_a = thermal_relaxation_step(p_a, m, V, dt, tau, self.R, self.T)
                 else:

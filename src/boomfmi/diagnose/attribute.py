@@ -22,8 +22,8 @@ Decisions carry margins against the recordings' own noise:
 from __future__ import annotations
 
 import itertools
-import os
 import math
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -100,10 +100,6 @@ class Candidate:
     holdout: dict = field(default_factory=dict)
     shrink: float = 0.0
     score: float = 0.0
-
-
-def _unpack(spec, z):
-    return {p: (10 ** v if log else v) for (p, lo, hi, log), v in zip(spec, z)}
 
 
 def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = None,

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 
-from .orifice import mass_flow
+from .orifice import signed_mass_flow, signed_mass_flow_slope
 from .params import Gas, Load
 
 
@@ -96,6 +96,16 @@ def stribeck_load(load: Load, v: float, v_s: float) -> Load:
     return load._replace(F_d=load.F_d + (load.F_s - load.F_d) * math.exp(-abs(v) / v_s))
 
 
+def _cushion(mdot: float, p: float, distance: float, length: float, A_n: float, P_e: float,
+             gas: Gas):
+    """The spear's engagement g [1] and the needle's flow into the chamber [kg/s] and its
+    slope in ``p`` [kg/(s Pa)], where the cushion acts on ``mdot``; else None."""
+    if length <= 0.0 or mdot >= 0.0 or distance >= length:
+        return None
+    engaged = min(1.0, (length - max(distance, 0.0)) / (0.2 * length))
+    return engaged, signed_mass_flow(A_n, P_e, p, gas), signed_mass_flow_slope(A_n, P_e, p, gas)
+
+
 def cushion_outflow(mdot: float, p: float, distance: float, length: float, A_n: float,
                     P_e: float, gas: Gas = Gas()) -> float:
     """End-of-stroke cushioning: a chamber's mass flow [kg/s] once the cushion acts on
@@ -108,25 +118,28 @@ def cushion_outflow(mdot: float, p: float, distance: float, length: float, A_n: 
     ``1/mdot^2 = 1/mdot_v^2 + g/mdot_n^2``, the spear's engagement ``g`` rising from 0
     to 1 over the first fifth of ``length`` (so the flow is continuous in the position).
     Inflow passes the cushion's check valve freely.  ``length <= 0``: off."""
-    if length <= 0.0 or mdot >= 0.0 or distance >= length:
+    c = _cushion(mdot, p, distance, length, A_n, P_e, gas)
+    if c is None:
         return mdot
-    engaged = min(1.0, (length - max(distance, 0.0)) / (0.2 * length))
-    mdot_n = mass_flow(A_n, p, P_e, gas)
-    if mdot_n <= 0.0:
+    g, n, _ = c
+    if n >= 0.0:                        # no pressure left to push air out through the needle
         return 0.0
-    return mdot / math.sqrt(1.0 + engaged * (mdot / mdot_n) ** 2)
+    return mdot / math.sqrt(1.0 + g * (mdot / n) ** 2)
 
 
 def cushion_outflow_slope(mdot: float, slope: float, p: float, distance: float, length: float,
                           A_n: float, P_e: float, gas: Gas = Gas()) -> float:
     """The slope [kg/(s Pa)] of :func:`cushion_outflow` with respect to ``p``, given the
-    valve's flow ``mdot`` and its slope ``slope`` (a central difference)."""
-    if length <= 0.0 or mdot >= 0.0 or distance >= length:
+    valve's flow ``mdot`` and its slope ``slope``: with ``r = mdot / mdot_n`` and
+    ``D = 1 + g r^2``, ``(slope + g r^3 dmdot_n/dp) / D^(3/2)``."""
+    c = _cushion(mdot, p, distance, length, A_n, P_e, gas)
+    if c is None:
         return slope
-    h = max(1.0, 1e-6 * p)
-    up = cushion_outflow(mdot + slope * h, p + h, distance, length, A_n, P_e, gas)
-    down = cushion_outflow(min(mdot - slope * h, -1e-300), p - h, distance, length, A_n, P_e, gas)
-    return min((up - down) / (2.0 * h), 0.0)
+    g, n, s_n = c
+    if n >= 0.0:
+        return 0.0
+    r = mdot / n
+    return (slope + g * r ** 3 * s_n) / (1.0 + g * r * r) ** 1.5
 
 
 def sensor_lag_step(measured: float, true: float, dt: float, tau: float) -> float:
