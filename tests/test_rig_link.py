@@ -172,6 +172,29 @@ def test_a_200_ms_stall_engages_the_fail_safe_exactly_then(fmu, rig, tmp_path):
     assert rec["failsafe"].iloc[-1] == 0
 
 
+def test_a_real_time_bridge_paces_to_the_wall_clock_with_one_exchange_per_step(fmu, rig):
+    r = rig(lockstep=False, record=False)
+    n, dt = 300, 1e-3
+    with FmuInstance(fmu("hardware_bridge")) as b:
+        b.initialize(dict(mode="udp", rig=r.url), inputs={"u": 6.0})
+        t, t_rig, late = 0.0, [], []
+        wall0 = time.perf_counter()
+        for _ in range(n):
+            b.set(u=6.0)
+            b.step_to(t, dt)
+            t += dt
+            got = b.get("t_rig", "lateness")
+            t_rig.append(got["t_rig"])
+            late.append(got["lateness"])
+        wall = time.perf_counter() - wall0
+    r.stop()
+    assert n * dt <= wall < n * dt + 0.1                        # paced: never ahead of the clock
+    assert r.count("commands") == n and r.count("status requests") == 1   # the set-up's only
+    rig_dt = np.diff(t_rig)
+    assert np.median(rig_dt) == pytest.approx(dt, abs=1e-9)     # each step, the rig's next tick
+    assert 0.0 <= np.median(late) < dt                          # steps begin inside their slot
+
+
 def test_rig_killed_mid_run_ends_with_a_clear_error_and_keeps_every_row(fmu, rig, tmp_path):
     r = rig()
     out = tmp_path / "run.csv"

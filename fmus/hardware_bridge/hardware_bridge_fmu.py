@@ -16,8 +16,11 @@ Modes (parameter ``mode``):
 * ``udp``: talks to the rig at ``rig`` (udp://HOST:PORT) with authenticated datagrams
   (``link/protocol.py``; key from ``key_file``, else $BOOMFMI_LINK_KEY).  Each step
   sends the command, retrying up to ``retries`` times within ``timeout``.  A rig in
-  lockstep advances one sample per step; with a real-time rig the bridge paces itself
-  to the wall clock.  A lost answer holds the last sample and clears link_ok; more than
+  lockstep advances one sample per step and answers with the sample at t + dt.  With a
+  real-time rig the bridge paces itself to the wall clock: one exchange per step, as a
+  DAQ tick, sends the command at the slot's start and outputs the rig's latest sample
+  (measured at the rig's last tick, so up to one step old), then waits for the slot's
+  end; the round trip falls inside the slot, not after it.  A lost answer holds the last sample and clears link_ok; more than
   ``loss_budget`` consecutive losses is an fmi2Error.
 
 Unmodelled effect, off by default: ``tau_sensor`` > 0 passes p_a, p_b and alpha (and
@@ -63,6 +66,7 @@ class HardwareBridge(BoomSlave):
         output("failsafe", False, "1", "the rig reports its fail-safe state (valve centred by its watchdog)", type="Boolean"),
         output("lost_packets", 0, "1", "answers lost so far (after retries)", type="Integer"),
         output("deadline_misses", 0, "1", "steps begun more than a step late against the wall clock (real-time rig only)", type="Integer"),
+        output("lateness", 0.0, "s", "real-time rig: how late the last step began against the wall clock; else 0"),
         parameter("mode", "replay", "1", "replay: play the recording; udp: talk to the rig", type="String"),
         parameter("recording", "", "1", "replay mode: path of the recording (CSV, recording format)", type="String"),
         parameter("rig", "udp://127.0.0.1:47800", "1", "udp mode: the rig's address, udp://HOST:PORT", type="String"),
@@ -193,13 +197,14 @@ class HardwareBridge(BoomSlave):
             now = time.perf_counter()
             if self._wall0 is None:
                 self._wall0 = now - t
-            if now > self._wall0 + t + dt:
+            self.lateness = now - (self._wall0 + t)
+            if self.lateness > dt:
                 self.deadline_misses += 1
-            sample = self._exchange(self.u, t, dt)              # the command for [t, t + dt)
-            if sample is not None:
-                self._show(sample)
+            # one exchange, inside the slot: the command for [t, t + dt) out, the rig's
+            # latest sample back (a DAQ tick: write the output, read the inputs), then
+            # hold until the slot ends so the step returns on the wall clock's beat
+            sample = self._exchange(self.u, t, dt)
             _wait_until(self._wall0 + t + dt)
-            sample = self._exchange(None, t + dt, dt)           # the sample at t + dt
         else:
             sample = self._exchange(self.u, t, dt)              # lockstep: one command, one sample
             if sample is not None and abs(sample.t - (self._rig_t0 + t + dt)) > 0.5 * dt:

@@ -90,10 +90,13 @@ def _simulate(args) -> int:
 
 def _rig_serve(args) -> int:
     from .link.protocol import load_key
+    from .rig.server import realtime_priority
     from .rig import VirtualRig, load_config
     from .rig.server import serve
     key = load_key(args.key_file)
     plant = VirtualRig(load_config(args.config))
+    if args.priority:
+        print(realtime_priority(args.priority), flush=True)
     mode = "lockstep" if args.lockstep else "real time, 1 kHz"
 
     def ready(port: int) -> None:
@@ -179,6 +182,9 @@ def main(argv=None) -> int:
     p.add_argument("--config", type=Path, help="JSON: effects, noise, contact, parameters (default: reference rig, noise on)")
     p.add_argument("--key-file", help="file holding the shared link key (default: $BOOMFMI_LINK_KEY)")
     p.add_argument("--watchdog", type=float, default=0.05, help="fail-safe after this long without a command [s]")
+    p.add_argument("--priority", type=int, default=0, metavar="N",
+                   help="run under the real-time scheduler (SCHED_FIFO) at priority N, 1 to 99 (needs the "
+                        "right: root or CAP_SYS_NICE); 0: the normal scheduler (default)")
     p.set_defaults(run=_rig_serve)
     p = sub.add_parser("record", help="run an experiment on a rig through the hardware bridge, write a recording")
     p.add_argument("--experiment", default="paper_multistep")

@@ -23,7 +23,9 @@ sensors and writes its output at each tick.
 """
 from __future__ import annotations
 
+import ctypes
 import gc
+import os
 import select
 import signal
 import socket
@@ -35,6 +37,7 @@ from ..link.protocol import (FAILSAFE, LOCKSTEP, BadMac, Command, Malformed, Seq
 from ..physics import reference_rig as rig
 from ..recording import RecordingWriter
 
+MCL_CURRENT, MCL_FUTURE = 1, 2          # <sys/mman.h> on Linux
 COLUMNS = ("t", "u", "p_a", "p_b", "alpha", "f_ext", "x", "failsafe")
 
 
@@ -190,6 +193,36 @@ class RigServer:
             self.writer.close()
             self.writer = None
         self.sock.close()
+
+
+def realtime_priority(priority: int, pid: int = 0) -> str:
+    """Put process ``pid`` (0: this one) under the real-time FIFO scheduler at
+    ``priority`` (1 to 99), so that ordinary processes cannot delay its ticks; return a
+    line saying what was done.  Without the right to (root or CAP_SYS_NICE) the process
+    stays on the normal scheduler and the line says so: a rig still runs, with more
+    jitter."""
+    if not 1 <= priority <= 99:
+        raise ValueError(f"real-time priority must be 1 to 99, not {priority}")
+    if not hasattr(os, "sched_setscheduler"):
+        return "real-time priority: not available on this system; normal scheduler"
+    try:
+        os.sched_setscheduler(pid, os.SCHED_FIFO, os.sched_param(priority))
+    except PermissionError:
+        return "real-time priority: not permitted (needs root or CAP_SYS_NICE); normal scheduler"
+    return f"real-time priority: SCHED_FIFO {priority}; {lock_memory()}"
+
+
+def lock_memory() -> str:
+    """Lock this process's pages in RAM (``mlockall``), as real-time programs do: a page
+    the kernel evicted (its code, a library) costs a fault of milliseconds when the loop
+    next touches it.  Returns a line saying what was done."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        if libc.mlockall(MCL_CURRENT | MCL_FUTURE) != 0:
+            return f"memory not locked ({os.strerror(ctypes.get_errno())})"
+    except (OSError, AttributeError):
+        return "memory not locked (no mlockall here)"
+    return "memory locked"
 
 
 def serve(plant, key: bytes, port: int, host: str = "127.0.0.1", lockstep: bool = False,
