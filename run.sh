@@ -29,3 +29,7 @@ cat out/rig.log
 $B identify out/paper_multistep_rig.csv --out out/params.json
 $B simulate build/excavator_boom.ssp --experiment out/paper_multistep_rig.csv --params out/params.ssv \
     --out out/paper_multistep_identified.csv
+
+# the virtual view of the rig's recording, rendered for the report (no browser needed);
+# `boomfmi view --replay out/paper_multistep_rig.csv` serves it live on 127.0.0.1:8765
+$B view --replay out/paper_multistep_rig.csv --export out/paper_multistep_rig.gif --stop 4 --fps 10 --size 800x450

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# Create .venv (Python 3.11) with boomfmi and its test dependencies, and build the FMUs.
-# Idempotent: reinstalls only when pyproject.toml changed; build_fmus.py always runs
-# (a few seconds) so the FMUs match the sources.
+# Create .venv (Python 3.11) with boomfmi and its test dependencies, install the virtual
+# view's browser libraries (three.js, uPlot) with npm, and build the FMUs.  With
+# --browser, also Debian's chromium and chromium-driver for the view's browser test.
+# Idempotent: reinstalls only when pyproject.toml or the lock file changed;
+# build_fmus.py always runs (a few seconds) so the FMUs match the sources.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -26,4 +28,26 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
     .venv/bin/python -m pip install --quiet -e '.[test]'
     touch "$stamp"
 fi
+
+web=src/boomfmi/view/web
+if [ ! -f "$web/node_modules/.package-lock.json" ] || [ "$web/package-lock.json" -nt "$web/node_modules/.package-lock.json" ]; then
+    if command -v npm >/dev/null 2>&1; then
+        npm ci --prefix "$web" --no-audit --no-fund --loglevel=error
+    else
+        echo "bootstrap: npm not found; the virtual view needs Node.js and npm (three.js, uPlot)" >&2
+    fi
+fi
+
+if [ "${1:-}" = "--browser" ] && ! { command -v chromium && command -v chromedriver; } >/dev/null 2>&1; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+        echo "bootstrap: installing Debian's chromium and chromium-driver (the view's browser test)"
+        export DEBIAN_FRONTEND=noninteractive
+        apt-get install -y -qq chromium chromium-driver >/dev/null 2>&1 ||
+            { apt-get update -qq && apt-get install -y -qq chromium chromium-driver >/dev/null; }
+    else
+        echo "bootstrap: chromium and chromedriver are missing and cannot be installed here (needs root" \
+             "and apt-get); the view's browser test will be skipped" >&2
+    fi
+fi
+
 .venv/bin/python build_fmus.py

@@ -78,13 +78,33 @@ def _simulate(args) -> int:
     if args.rig:
         given.update({"hardware_bridge.mode": "udp", "hardware_bridge.rig": args.rig})
     result = run_experiment(args.ssp, args.experiment, args.step, args.stop, args.algorithm,
-                            [*args.params, given] if given else args.params, progress=True)
+                            [*args.params, given] if given else args.params, progress=True,
+                            view=args.view)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     result.to_csv(args.out, index=False, float_format="%.10g")
     last = result.iloc[-1]
     print(f"wrote {args.out}: {len(result)} rows, t = {result.t.iloc[0]:g} to {last.t:g} s; "
           f"at the end x = {1000 * last.x:.2f} mm, p_a = {last.p_a / 1e5:.3f} bar, "
           f"p_b = {last.p_b / 1e5:.3f} bar (gauge)")
+    return 0
+
+
+def _view(args) -> int:
+    if args.export:
+        if not args.replay:
+            raise ValueError("--export renders a run file: give --replay RUN.csv")
+        from .view.export import export
+        path, n = export(args.replay, args.export, fps=args.fps, start=args.start, stop=args.stop,
+                         size=args.size)
+        print(f"wrote {path}: {n} frames at {args.fps:g} per second")
+        return 0
+    from .view.server import serve
+
+    def ready(url: str) -> None:
+        what = f"replaying {args.replay}" if args.replay else f"live from {args.live}"
+        print(f"view on {url} ({what}); Ctrl-C stops it", flush=True)
+
+    serve(args.replay, args.live, args.host, args.port, ready)
     return 0
 
 
@@ -170,6 +190,8 @@ def main(argv=None) -> int:
     link.add_argument("--rig", help="teleoperation: the hardware bridge talks to the rig at udp://HOST:PORT "
                                     "(a lockstep or real-time `boomfmi rig serve`)")
     p.add_argument("--algorithm", choices=("gauss-seidel", "jacobi"), default="gauss-seidel")
+    p.add_argument("--view", metavar="udp://HOST:PORT",
+                   help="stream the run to `boomfmi view --live` listening there (60 samples per second)")
     p.add_argument("--out", type=Path, required=True, help="output CSV (recording columns plus x, v)")
     p.set_defaults(run=_simulate)
     p = sub.add_parser("rig", help="the virtual rig")
@@ -216,6 +238,22 @@ def main(argv=None) -> int:
                    help="HOLD recordings, never fitted on: every figure of shrink is measured on them")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.set_defaults(run=_diagnose)
+    p = sub.add_parser("view", help="the virtual boom in a browser, from a run file or live; or a video of it")
+    source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument("--replay", type=Path, metavar="RUN.csv",
+                        help="a recording, or a teleoperation run from `boomfmi simulate` (model beside machine)")
+    source.add_argument("--live", metavar="udp://HOST:PORT",
+                        help="listen there for a co-simulation's samples (`boomfmi simulate --view`)")
+    p.add_argument("--host", default="127.0.0.1", help="address of the page (default: loopback only)")
+    p.add_argument("--port", type=int, default=8765, help="port of the page (0: any free port, printed)")
+    p.add_argument("--export", type=Path, metavar="OUT.mp4|OUT.gif",
+                   help="render the replay to a video instead of serving the page")
+    p.add_argument("--fps", type=float, default=25.0, help="--export: frames per second (default 25)")
+    p.add_argument("--start", type=float, default=None, help="--export: from this time [s]")
+    p.add_argument("--stop", type=float, default=None, help="--export: to this time [s]")
+    p.add_argument("--size", default="1280x720", help="--export: WIDTHxHEIGHT in pixels (default 1280x720)")
+    p.set_defaults(run=_view)
+
     p = sub.add_parser("describe", help="print FMU interfaces as Markdown tables")
     p.add_argument("fmus", nargs="+", type=Path)
     p.set_defaults(run=_describe)

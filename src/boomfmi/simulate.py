@@ -72,10 +72,29 @@ def experiment_inputs(experiment: str, input_names: list[str]):
     return table, float(rec.data["t"].iloc[-1])
 
 
+def live_columns(cosim, bridges: list[str], P_atm: float) -> dict[str, tuple[str, float]]:
+    """The live view's sample names -> (result column, offset): the model's posture
+    and gauge pressures, the bridge's measurements as ``*_measured``, the forces."""
+    cols = {}
+    for n, outs in cosim.outputs.items():
+        for o in outs:
+            if n in bridges:
+                if o in ("p_a", "p_b", "alpha", "x"):
+                    cols[f"{o}_measured"] = (f"{n}.{o}", 0.0)
+                elif o == "f_ext":
+                    cols["f_ext"] = (f"{n}.{o}", 0.0)
+            elif o in ("p_a", "p_b"):
+                cols[o] = (f"{n}.{o}", -P_atm)
+            elif o in ("alpha", "x", "f_est", "f_reflect"):
+                cols[o] = (f"{n}.{o}", 0.0)
+    return cols
+
+
 def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
                    stop_time: float | None = None, algorithm: str = "gauss-seidel",
-                   parameters=None, progress: bool = False) -> pd.DataFrame:
-    """Simulate ``experiment`` on the SSP; return recording columns plus x and v."""
+                   parameters=None, progress: bool = False, view: str | None = None) -> pd.DataFrame:
+    """Simulate ``experiment`` on the SSP; return recording columns plus x and v.
+    ``view`` (udp://HOST:PORT) streams the run to ``boomfmi view --live`` as it goes."""
     if experiment not in PROFILES and Path(experiment).suffix.lower() != ".csv" \
             and not Path(experiment).exists():
         raise ValueError(f"unknown experiment {experiment!r}: give one of {', '.join(PROFILES)} "
@@ -92,12 +111,22 @@ def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
             raise ValueError(f"the system has no free input named 'u' to drive; its inputs: {cosim.inputs}")
         bridges = [n for n, i in cosim.instances.items() if i.model_description.modelName == "hardware_bridge"]
         inputs, duration = experiment_inputs(experiment, u_names)
-        result = cosim.simulate(stop_time if stop_time is not None else duration, inputs,
-                                progress=progress)
-        outputs = [c for c in result.columns if c.count(".") == 1 and c not in cosim.inputs
-                   and c.partition(".")[0] not in bridges and c.rpartition(".")[2] in RECORDED]
         P_atm = next((float(p.value) for n, p in cosim.structure.parameters.items()
                       if n.endswith(".P_atm")), rig.P_atm)
+        sender = None
+        if view:
+            from .view.live import LiveSender
+            geom = [next((float(p.value) for n, p in cosim.structure.parameters.items() if n.endswith("." + g)),
+                         getattr(rig, g)) for g in ("a", "b", "h", "l_min")]
+            sender = LiveSender(view, live_columns(cosim, bridges, P_atm), geom)
+        try:
+            result = cosim.simulate(stop_time if stop_time is not None else duration, inputs,
+                                    progress=progress, monitor=sender)
+        finally:
+            if sender is not None:
+                sender.close()
+        outputs = [c for c in result.columns if c.count(".") == 1 and c not in cosim.inputs
+                   and c.partition(".")[0] not in bridges and c.rpartition(".")[2] in RECORDED]
     model_u = [n for n in u_names if n.partition(".")[0] not in bridges] or u_names
     out = pd.DataFrame({"t": result["time"], "u": result[model_u[0]]})
     for name in RECORDED:

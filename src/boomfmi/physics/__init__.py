@@ -9,7 +9,8 @@ from . import effects, reference_rig
 from .chamber import chamber_inflows, chamber_pressure_step, chamber_volumes, pressure_rates
 from .force_estimation import (low_pass_step, motion_filter_step, observed_external_force,
                                pneumatic_stiffness, position_error_force, reflected_force)
-from .geometry import alpha_from_x, check_geometry, cylinder_length, phi_from_x, x_from_alpha
+from .geometry import (alpha_from_x, check_geometry, cylinder_length, lever_arm, linkage_points,
+                       phi_from_x, x_from_alpha)
 from .load import (acceleration, advance_load, drive_force, friction_force, piston_force,
                    slide_or_stick, sliding_acceleration)
 from .orifice import (critical_pressure_ratio, mass_flow, mass_flow_slope, signed_mass_flow,
@@ -23,7 +24,8 @@ __all__ = [
     "effects", "reference_rig", "chamber_pressure_step", "chamber_volumes", "pressure_rates",
     "pneumatic_stiffness", "position_error_force", "reflected_force", "low_pass_step",
     "motion_filter_step", "observed_external_force", "alpha_from_x",
-    "check_geometry", "cylinder_length", "phi_from_x", "x_from_alpha", "acceleration",
+    "check_geometry", "cylinder_length", "phi_from_x", "x_from_alpha", "linkage_points", "lever_arm",
+    "acceleration",
     "advance_load", "drive_force", "friction_force", "piston_force", "slide_or_stick",
     "critical_pressure_ratio", "mass_flow", "signed_mass_flow", "Cylinder", "Gas",
     "Geometry", "Load", "Valve", "check_cylinder", "check_gas", "check_load",

@@ -68,3 +68,29 @@ def check_geometry(geom: Geometry, L: float) -> None:
         raise ParameterError(
             "l_min", l_min,
             f"the cylinder at x = L is longer than a + b = {a + b:g} m, so Eq. 10 is undefined")
+
+
+def linkage_points(alpha, geom: Geometry = Geometry()):
+    """The linkage's pivots in the boom's plane [m], for drawing it (Eq. 10 to 12).
+
+    The boom pivot O is the origin, x horizontal (away from the machine), y up.  The
+    cylinder's base pivot C lies ``a`` from O and ``h`` below it; the rod's pivot R on
+    the boom lies ``b`` from O, at the angle ``alpha`` from OC (so |CR| is the cylinder
+    length l of Eq. 11 and the cylinder's angle to the horizontal is phi of Eq. 10).
+    Returns ``(C, R)`` with C = (C_x, C_y) and R = (R_x, R_y); ``alpha`` [rad] may be
+    an array, and then R's coordinates are arrays.
+    """
+    a, b, h, _ = geom
+    beta = math.asin(h / a)                   # OC below the horizontal
+    C = (a * math.cos(beta), -h)
+    R = (b * xp.cos(alpha - beta), b * xp.sin(alpha - beta))
+    return C, R
+
+
+def lever_arm(alpha, geom: Geometry = Geometry()):
+    """The cylinder axis's distance from the boom pivot O [m]: the moment arm of the
+    piston force about O, d = a b sin(alpha) / l (twice the triangle OCR's area over
+    its side l)."""
+    a, b, _, _ = geom
+    l = xp.sqrt(a * a + b * b - 2.0 * a * b * xp.cos(alpha))
+    return a * b * xp.sin(alpha) / l

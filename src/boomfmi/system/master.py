@@ -225,14 +225,16 @@ class CoSimulation:
                 values[i] = v
 
     def simulate(self, stop_time: float | None = None, inputs=None, start_time: float | None = None,
-                 progress: bool = False) -> pd.DataFrame:
+                 progress: bool = False, monitor=None) -> pd.DataFrame:
         """Run from the start time to ``stop_time`` [s]; return one row per
         communication point, t0 included.
 
         ``inputs`` drives the run's inputs (``valve.u``, or a system connector's name):
         a mapping of constants, a callable ``inputs(t) -> {name: value}``, or a
         DataFrame with a ``t`` (or ``time``) column whose rows hold from their time to
-        the next.  An input not given keeps its start value.
+        the next.  An input not given keeps its start value.  ``monitor(columns, row)``,
+        where given, sees each row as it is recorded (the live view's feed); it must be
+        quick.
         """
         if self._ran:
             raise RuntimeError("a CoSimulation runs once (its FMUs have left initialisation); make a new one")
@@ -316,6 +318,8 @@ class CoSimulation:
                         self._read(n, self._all_out, values)
                 take_inputs(t_next)
                 record_row(k + 1, t_next)
+                if monitor is not None:
+                    monitor(columns, rows[k + 1])
                 bar.update(t_next - t0)
         finally:
             bar.close()

@@ -1,0 +1,340 @@
+// boomfmi's virtual view: the boom at the rig's geometry, the machine's posture with
+// the model's as a ghost, the estimated force at the bucket, and live plots.
+// Frames come over the WebSocket /ws (protocol: src/boomfmi/view/server.py); the page
+// does no physics: the server sends the pivots R (rod) and T (bucket tip) per frame.
+import * as THREE from 'three';
+import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+import uPlot from 'uplot';
+
+const COLORS = { machine: 0xf0a030, ghost: 0x5ab0ff, force: 0xff4d5e, truth: 0x9aa3b5, steel: 0xb8c0cc, base: 0x59606c };
+const FORCE_SCALE = 0.15 / 500;   // m of arrow per N of piston force
+const WINDOW = 10;                // s of plot history
+
+const $ = (id) => document.getElementById(id);
+
+// -- the test and automation hook -----------------------------------------------------------
+const view = {
+  connected: false, connections: 0, framesReceived: 0, errors: [],
+  mode: null, t: null, playing: false, webgl: false, hello: null,
+  _arrivals: [],
+  fps() { const now = performance.now(); return this._arrivals.filter((a) => now - a <= 1000).length; },
+  state() { return drawnState(); },
+  play() { send({ cmd: 'play' }); }, pause() { send({ cmd: 'pause' }); },
+  seek(t) { send({ cmd: 'seek', t }); },
+};
+window.boomView = view;
+
+// -- 3D scene --------------------------------------------------------------------------------
+const three = { scene: null, camera: null, renderer: null, controls: null, machine: null, ghost: null,
+                fEst: null, fExt: null, geo: null, dirty: true };
+
+function webglAvailable() {
+  try {
+    const c = document.createElement('canvas');
+    return !!(c.getContext('webgl2') || c.getContext('webgl'));
+  } catch (e) { return false; }
+}
+
+function material(color, ghost) {
+  return ghost
+    ? new THREE.MeshStandardMaterial({ color, transparent: true, opacity: 0.35, depthWrite: false, roughness: 0.6 })
+    : new THREE.MeshStandardMaterial({ color, roughness: 0.55, metalness: 0.2 });
+}
+
+function along(mesh, length) {         // a cylinder or box lying on +x from 0 to length
+  mesh.geometry.rotateZ(-Math.PI / 2);
+  mesh.geometry.translate(length / 2, 0, 0);
+  return mesh;
+}
+
+// One posture of the mechanism: the boom (a group turning about O) and the cylinder
+// (a group turning about C, its rod sliding out to R).
+function mechanism(g, ghost) {
+  const boomMat = material(ghost ? COLORS.ghost : COLORS.machine, ghost);
+  const steel = material(ghost ? COLORS.ghost : COLORS.steel, ghost);
+  const boom = new THREE.Group();
+  const beam = new THREE.Mesh(new THREE.BoxGeometry(g.r_tip, 0.035, 0.04), boomMat);
+  beam.position.x = g.r_tip / 2;
+  boom.add(beam);
+  const bucket = new THREE.Mesh(new THREE.BoxGeometry(0.06, 0.07, 0.08), boomMat);
+  bucket.position.set(g.r_tip, -0.03, 0);
+  boom.add(bucket);
+  const pinR = new THREE.Mesh(new THREE.CylinderGeometry(0.008, 0.008, 0.06, 16), steel);
+  pinR.rotation.x = Math.PI / 2; pinR.position.x = g.b;
+  boom.add(pinR);
+
+  const cyl = new THREE.Group();
+  cyl.position.set(g.C[0], g.C[1], 0);
+  const body = along(new THREE.Mesh(new THREE.CylinderGeometry(g.bore / 2 + 0.004, g.bore / 2 + 0.004, g.body_length, 24), boomMat), g.body_length);
+  const rod = along(new THREE.Mesh(new THREE.CylinderGeometry(g.rod / 2, g.rod / 2, g.rod_length, 16), steel), g.rod_length);
+  cyl.add(body, rod);
+  const group = new THREE.Group();
+  group.add(boom, cyl);
+  if (ghost) group.renderOrder = 1;
+  return { group, boom, cyl, rod };
+}
+
+function pose(m, f) {
+  const g = three.geo;
+  if (!f || !f.R) { m.group.visible = false; return; }
+  m.group.visible = true;
+  m.boom.rotation.z = Math.atan2(f.T[1] - g.O[1], f.T[0] - g.O[0]);
+  const dx = f.R[0] - g.C[0], dy = f.R[1] - g.C[1];
+  m.cyl.rotation.z = Math.atan2(dy, dx);
+  m.rod.position.x = Math.hypot(dx, dy) - g.rod_length;
+}
+
+function arrow(a, f, tip, boomAngle) {
+  if (f === null || f === undefined || !tip || Math.abs(f) < 2) { a.visible = false; return 0; }
+  const s = Math.sign(f);   // positive: against extension, so down on the bucket (toward smaller alpha)
+  const dir = new THREE.Vector3(s * Math.sin(boomAngle), -s * Math.cos(boomAngle), 0);
+  const length = Math.max(0.02, Math.abs(f) * FORCE_SCALE);
+  a.position.set(tip[0] - dir.x * length, tip[1] - dir.y * length, 0.05);   // its head at the bucket
+  a.setDirection(dir);
+  a.setLength(length, Math.min(0.04, 0.4 * length), Math.min(0.025, 0.25 * length));
+  a.visible = true;
+  return length;
+}
+
+function buildScene(g) {
+  three.geo = g;
+  const scene = new THREE.Scene();
+  scene.background = new THREE.Color(0x1c2027);
+  scene.add(new THREE.HemisphereLight(0xffffff, 0x303540, 1.6));
+  const sun = new THREE.DirectionalLight(0xffffff, 1.8);
+  sun.position.set(0.6, 1.2, 1.0);
+  scene.add(sun);
+  const grid = new THREE.GridHelper(2, 20, 0x3a414d, 0x2a3039);
+  grid.position.y = g.C[1] - 0.12;
+  scene.add(grid);
+  const baseMat = material(COLORS.base, false);
+  const post = new THREE.Mesh(new THREE.BoxGeometry(0.05, 0.12 - g.C[1], 0.07), baseMat);
+  post.position.set(0, (g.C[1] - 0.12) / 2, 0);
+  const sill = new THREE.Mesh(new THREE.BoxGeometry(g.C[0] + 0.08, 0.03, 0.09), baseMat);
+  sill.position.set(g.C[0] / 2, g.C[1] - 0.03, 0);
+  scene.add(post, sill);
+  for (const p of [g.O, g.C]) {
+    const pin = new THREE.Mesh(new THREE.CylinderGeometry(0.01, 0.01, 0.08, 16), material(COLORS.steel, false));
+    pin.rotation.x = Math.PI / 2; pin.position.set(p[0], p[1], 0);
+    scene.add(pin);
+  }
+  three.machine = mechanism(g, false);
+  three.ghost = mechanism(g, true);
+  three.ghost.group.visible = false;
+  scene.add(three.machine.group, three.ghost.group);
+  three.fEst = new THREE.ArrowHelper(new THREE.Vector3(0, -1, 0), new THREE.Vector3(), 0.1, COLORS.force);
+  three.fExt = new THREE.ArrowHelper(new THREE.Vector3(0, -1, 0), new THREE.Vector3(), 0.1, COLORS.truth);
+  three.fEst.visible = three.fExt.visible = false;
+  scene.add(three.fEst, three.fExt);
+  three.scene = scene;
+
+  const host = $('scene');
+  three.camera = new THREE.PerspectiveCamera(40, host.clientWidth / Math.max(1, host.clientHeight), 0.01, 20);
+  three.camera.position.set(0.32, 0.12, 1.15);
+  if (!three.renderer) {
+    view.webgl = webglAvailable();
+    if (view.webgl) {
+      three.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+      three.renderer.setPixelRatio(window.devicePixelRatio);
+      host.appendChild(three.renderer.domElement);
+    } else {
+      host.innerHTML = '<p class="nogl">WebGL is not available in this browser: the 3D view is off, the plots go on.</p>';
+      console.warn('boomfmi view: no WebGL context');
+    }
+  }
+  if (three.renderer) {
+    three.controls = new OrbitControls(three.camera, three.renderer.domElement);
+    three.controls.target.set(0.25, 0.05, 0);
+    three.controls.addEventListener('change', () => { three.dirty = true; });
+    three.controls.update();
+  }
+  resize();
+}
+
+function drawnState() {
+  const g = three.geo;
+  if (!g) return null;
+  const ref = Math.atan2(g.C[1] - g.O[1], g.C[0] - g.O[0]);          // the direction O->C
+  const m = three.machine, gh = three.ghost;
+  return {
+    t: view.t, playing: view.playing, webgl: view.webgl,
+    machineAlpha: m.boom.rotation.z - ref, machineVisible: m.group.visible,
+    ghostAlpha: gh.boom.rotation.z - ref, ghostVisible: gh.group.visible,
+    arrowLength: three.fEst.visible ? three.fEst.userData.length : 0,
+    fEst: last ? last.f_est : null,
+  };
+}
+
+// -- plots -----------------------------------------------------------------------------------
+const PLOTS = [
+  { title: 'p_a [bar gauge]: machine, model dashed', unit: 'bar', series: [['machine', COLORS.machine, (f) => bar(f.machine && f.machine.p_a)],
+                                                    ['model', COLORS.ghost, (f) => bar(f.model && f.model.p_a), true]] },
+  { title: 'p_b [bar gauge]: machine, model dashed', unit: 'bar', series: [['machine', COLORS.machine, (f) => bar(f.machine && f.machine.p_b)],
+                                                    ['model', COLORS.ghost, (f) => bar(f.model && f.model.p_b), true]] },
+  { title: 'x [mm]: machine, model dashed', unit: 'mm', series: [['machine', COLORS.machine, (f) => mm(f.machine && f.machine.x)],
+                                          ['model', COLORS.ghost, (f) => mm(f.model && f.model.x), true]] },
+  { title: 'force on the piston [N]: f_est, f_ext dashed', unit: 'N', series: [['f_est', COLORS.force, (f) => f.f_est],
+                                            ['f_ext (truth)', COLORS.truth, (f) => f.f_ext, true]] },
+];
+function bar(p) { return p === null || p === undefined ? null : p / 1e5; }
+function mm(x) { return x === null || x === undefined ? null : x * 1e3; }
+const hex = (c) => '#' + c.toString(16).padStart(6, '0');
+const plots = { charts: [], data: [], dirty: false };
+
+function buildPlots() {
+  const host = $('plots');
+  host.innerHTML = '';
+  plots.charts = []; plots.data = [];
+  for (const p of PLOTS) {
+    const div = document.createElement('div');
+    div.className = 'plot';
+    host.appendChild(div);
+    const opts = {
+      title: p.title, width: Math.max(200, div.clientWidth), height: Math.max(80, div.clientHeight - 10),
+      scales: { x: { time: false } }, legend: { show: false },
+      axes: [{ stroke: '#8a93a3', grid: { stroke: '#2a3039' } }, { stroke: '#8a93a3', grid: { stroke: '#2a3039' }, size: 50 }],
+      series: [{ label: 't [s]' }, ...p.series.map(([label, color, , dashed]) => ({
+        label, stroke: hex(color), width: 1.5, dash: dashed ? [6, 4] : undefined, spanGaps: false,
+      }))],
+    };
+    const data = [[], ...p.series.map(() => [])];
+    plots.data.push(data);
+    plots.charts.push(new uPlot(opts, data, div));
+  }
+}
+
+function plotPush(f) {
+  PLOTS.forEach((p, i) => {
+    const d = plots.data[i];
+    d[0].push(f.t);
+    p.series.forEach(([, , get], j) => { const v = get(f); d[j + 1].push(v === undefined ? null : v); });
+    let cut = 0;
+    while (cut < d[0].length && d[0][cut] < f.t - WINDOW) cut++;
+    if (cut) d.forEach((col) => col.splice(0, cut));
+  });
+  plots.dirty = true;
+}
+
+function plotReset(frames) {
+  plots.data.forEach((d) => d.forEach((col) => { col.length = 0; }));
+  frames.forEach(plotPush);
+}
+
+// -- frames and the connection ---------------------------------------------------------------
+let socket = null, last = null, retry = 500, wanted = null;
+
+function send(msg) { if (socket && socket.readyState === WebSocket.OPEN) socket.send(JSON.stringify(msg)); }
+
+function show(f) {
+  last = f;
+  view.t = f.t;
+  view.playing = !!f.playing;
+  if (!three.geo) return;
+  pose(three.machine, f.machine);
+  pose(three.ghost, f.model);
+  const ang = three.machine.boom.rotation.z;
+  three.fEst.userData.length = arrow(three.fEst, f.f_est, f.machine && f.machine.T, ang);
+  arrow(three.fExt, f.f_ext, f.machine && f.machine.T, ang);
+  three.dirty = true;
+  const deg = (a) => (a === null || a === undefined ? '   -  ' : (a * 180 / Math.PI).toFixed(2).padStart(6));
+  const num = (v, d = 0) => (v === null || v === undefined ? '-' : v.toFixed(d));
+  $('readout').textContent =
+    `t       ${f.t.toFixed(3)} s\n` +
+    `alpha   ${deg(f.machine && f.machine.alpha)} deg machine   ${deg(f.model && f.model.alpha)} deg model\n` +
+    `x       ${num(mm(f.machine && f.machine.x), 1).padStart(6)} mm  machine   ${num(mm(f.model && f.model.x), 1).padStart(6)} mm  model\n` +
+    `f_est   ${num(f.f_est)} N   f_ext ${num(f.f_ext)} N   f_reflect ${num(f.f_reflect, 2)} N`;
+  if (view.mode === 'replay' && !seeking) {
+    $('seek').value = f.t;
+    $('time').textContent = `${f.t.toFixed(2)} s`;
+    $('play').textContent = f.playing ? 'pause' : 'play';
+  }
+}
+
+function onMessage(ev) {
+  const msg = JSON.parse(ev.data);
+  if (msg.type === 'hello') {
+    view.hello = msg; view.mode = msg.mode;
+    $('source').textContent = `${msg.mode}: ${msg.source}`;
+    $('controls').classList.toggle('live', msg.mode !== 'replay');
+    if (msg.duration !== null) { $('seek').min = msg.t0; $('seek').max = msg.t0 + msg.duration; }
+    if (!three.geo) buildScene(msg.scene);
+    if (wanted && msg.mode === 'replay') {            // back after a dropped connection: resume there
+      send({ cmd: 'speed', value: Number($('speed').value) });
+      if (!wanted.playing) send({ cmd: 'pause' });
+      send({ cmd: 'seek', t: wanted.t });
+      if (wanted.playing) send({ cmd: 'play' });
+    }
+  } else if (msg.type === 'history') {
+    plotReset(msg.frames);
+  } else if (msg.type === 'frame') {
+    view.framesReceived++;
+    const now = performance.now();
+    view._arrivals.push(now);
+    while (view._arrivals.length && now - view._arrivals[0] > 2000) view._arrivals.shift();
+    if (last && f_back(msg)) plotReset([]);
+    show(msg);
+    plotPush(msg);
+  } else if (msg.type === 'error') {
+    console.warn('boomfmi view:', msg.message);
+    view.errors.push(msg.message);
+  }
+}
+
+function f_back(f) { return last && f.t < last.t - 1e-9 && view.mode === 'live'; }   // a new live run
+
+function connect() {
+  const status = $('status');
+  socket = new WebSocket(`ws://${location.host}/ws`);
+  socket.onopen = () => {
+    view.connected = true; view.connections++; retry = 500;
+    status.textContent = 'connected'; status.className = 'up';
+  };
+  socket.onmessage = onMessage;
+  socket.onclose = () => {
+    if (view.connected) wanted = last ? { t: last.t, playing: !!last.playing } : wanted;
+    view.connected = false;
+    status.textContent = 'reconnecting'; status.className = 'down';
+    setTimeout(connect, retry);
+    retry = Math.min(5000, retry * 2);
+  };
+  socket.onerror = () => {};       // onclose follows and retries; nothing to report twice
+}
+
+// -- controls, sizing, the loop --------------------------------------------------------------
+let seeking = false;
+$('play').addEventListener('click', () => send({ cmd: view.playing ? 'pause' : 'play' }));
+$('seek').addEventListener('input', () => {
+  seeking = true;
+  $('time').textContent = `${Number($('seek').value).toFixed(2)} s`;
+  send({ cmd: 'seek', t: Number($('seek').value) });
+});
+$('seek').addEventListener('change', () => { seeking = false; });
+$('speed').addEventListener('change', () => send({ cmd: 'speed', value: Number($('speed').value) }));
+
+function resize() {
+  const host = $('scene');
+  if (three.renderer && three.camera) {
+    three.renderer.setSize(host.clientWidth, host.clientHeight);
+    three.camera.aspect = host.clientWidth / Math.max(1, host.clientHeight);
+    three.camera.updateProjectionMatrix();
+    three.dirty = true;
+  }
+  document.querySelectorAll('#plots .plot').forEach((div, i) => {
+    if (plots.charts[i]) plots.charts[i].setSize({ width: div.clientWidth, height: Math.max(80, div.clientHeight - 10) });
+  });
+}
+window.addEventListener('resize', resize);
+
+let lastPlot = 0;
+function loop(now) {
+  requestAnimationFrame(loop);
+  if (three.renderer && three.dirty) { three.renderer.render(three.scene, three.camera); three.dirty = false; }
+  if (plots.dirty && now - lastPlot > 33) {            // plots at 30 Hz at most
+    plots.charts.forEach((c, i) => c.setData(plots.data[i]));
+    plots.dirty = false; lastPlot = now;
+  }
+}
+
+buildPlots();
+connect();
+requestAnimationFrame(loop);
