@@ -84,15 +84,30 @@ function pose(m, f) {
   m.rod.position.x = Math.hypot(dx, dy) - g.rod_length;
 }
 
-function arrow(a, f, tip, boomAngle) {
-  if (f === null || f === undefined || !tip || Math.abs(f) < 2) { a.visible = false; return 0; }
+// A solid arrow along +y of unit length (shaft and head), scaled to the force.
+function solidArrow(color) {
+  const mat = new THREE.MeshStandardMaterial({ color, roughness: 0.4, emissive: color, emissiveIntensity: 0.25 });
+  const shaft = new THREE.Mesh(new THREE.CylinderGeometry(0.006, 0.006, 1, 12), mat);
+  const head = new THREE.Mesh(new THREE.ConeGeometry(0.018, 0.04, 16), mat);
+  const a = new THREE.Group();
+  a.add(shaft, head);
+  a.userData = { shaft, head, length: 0 };
+  return a;
+}
+
+function arrow(a, f, tip, boomAngle, z) {
+  if (f === null || f === undefined || !tip || Math.abs(f) < 2) { a.visible = false; a.userData.length = 0; return 0; }
   const s = Math.sign(f);   // positive: against extension, so down on the bucket (toward smaller alpha)
   const dir = new THREE.Vector3(s * Math.sin(boomAngle), -s * Math.cos(boomAngle), 0);
-  const length = Math.max(0.02, Math.abs(f) * FORCE_SCALE);
-  a.position.set(tip[0] - dir.x * length, tip[1] - dir.y * length, 0.05);   // its head at the bucket
-  a.setDirection(dir);
-  a.setLength(length, Math.min(0.04, 0.4 * length), Math.min(0.025, 0.25 * length));
+  const length = Math.max(0.05, Math.abs(f) * FORCE_SCALE);
+  const { shaft, head } = a.userData;
+  shaft.scale.y = length - 0.04;
+  shaft.position.y = (length - 0.04) / 2;
+  head.position.y = length - 0.02;
+  a.position.set(tip[0] - dir.x * length, tip[1] - dir.y * length, z);   // its head at the bucket
+  a.quaternion.setFromUnitVectors(new THREE.Vector3(0, 1, 0), dir);
   a.visible = true;
+  a.userData.length = length;
   return length;
 }
 
@@ -122,8 +137,8 @@ function buildScene(g) {
   three.ghost = mechanism(g, true);
   three.ghost.group.visible = false;
   scene.add(three.machine.group, three.ghost.group);
-  three.fEst = new THREE.ArrowHelper(new THREE.Vector3(0, -1, 0), new THREE.Vector3(), 0.1, COLORS.force);
-  three.fExt = new THREE.ArrowHelper(new THREE.Vector3(0, -1, 0), new THREE.Vector3(), 0.1, COLORS.truth);
+  three.fEst = solidArrow(COLORS.force);
+  three.fExt = solidArrow(COLORS.truth);
   three.fEst.visible = three.fExt.visible = false;
   scene.add(three.fEst, three.fExt);
   three.scene = scene;
@@ -233,8 +248,8 @@ function show(f) {
   pose(three.machine, f.machine);
   pose(three.ghost, f.model);
   const ang = three.machine.boom.rotation.z;
-  three.fEst.userData.length = arrow(three.fEst, f.f_est, f.machine && f.machine.T, ang);
-  arrow(three.fExt, f.f_ext, f.machine && f.machine.T, ang);
+  arrow(three.fEst, f.f_est, f.machine && f.machine.T, ang, 0.06);
+  arrow(three.fExt, f.f_ext, f.machine && f.machine.T, ang, -0.06);
   three.dirty = true;
   const deg = (a) => (a === null || a === undefined ? '   -  ' : (a * 180 / Math.PI).toFixed(2).padStart(6));
   const num = (v, d = 0) => (v === null || v === undefined ? '-' : v.toFixed(d));
