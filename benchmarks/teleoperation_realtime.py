@@ -31,12 +31,37 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 
+def machine_floor(duration: float, dt: float = 1e-3) -> str:
+    """What the machine alone allows: a bare loop paced like the bridge (sleep to
+    0.3 ms before each slot, then spin), doing nothing, under the same scheduling.
+    Counts the slots it woke in more than a step late: stalls no workload can avoid."""
+    import time
+    t0 = time.perf_counter()
+    late, worst, n = 0, 0.0, int(duration / dt)
+    for k in range(1, n + 1):
+        deadline = t0 + k * dt
+        pause = deadline - time.perf_counter() - 3e-4
+        if pause > 0:
+            time.sleep(pause)
+        while time.perf_counter() < deadline:
+            pass
+        lag = time.perf_counter() - deadline
+        worst = max(worst, lag)
+        if lag > dt:
+            late += 1
+            t0 += lag                  # no work to catch up on: start afresh
+    return (f"the machine's floor (a bare 1 kHz loop, same scheduling, {duration:g} s): "
+            f"{late} stalls of over a step, longest {1e3 * worst:.1f} ms")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cycles", type=int, default=3, help="digging cycles of 10 s")
     ap.add_argument("--config", type=Path, default=ROOT / "examples" / "rig" / "contact_soft.json")
     ap.add_argument("--priority", type=int, default=50,
                     help="SCHED_FIFO priority of the rig and the co-simulation where permitted; 0: normal scheduler")
+    ap.add_argument("--floor", action="store_true",
+                    help="first measure the machine's own stalls with a bare loop for as long as the run")
     args = ap.parse_args(argv)
     from boomfmi.experiments import dig
     from boomfmi.rig.server import realtime_priority
@@ -53,6 +78,7 @@ def main(argv=None) -> int:
                   if args.priority else "normal scheduler for both")
     cycle = dig()
     duration = args.cycles * cycle.duration
+    floor = machine_floor(duration) if args.floor else None
     params = {"hardware_bridge.mode": "udp", "hardware_bridge.rig": f"udp://127.0.0.1:{port}",
               "boom_load.x0": 0.0}
     try:
@@ -88,6 +114,8 @@ def main(argv=None) -> int:
               f"at t = {', '.join(f'{1e-3 * (k + 1):.2f}' for k in starts[:12])}{' ...' if len(starts) > 12 else ''} s")
     print(f"f_est from {f.min():.0f} to {f.max():.0f} N; the rig's true f_ext from "
           f"{result['hardware_bridge.f_ext'].min():.0f} to {result['hardware_bridge.f_ext'].max():.0f} N")
+    if floor:
+        print(floor)
     print(summary)
     return 0
 

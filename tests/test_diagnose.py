@@ -28,9 +28,9 @@ def run(*args, cwd):
                           cwd=cwd, capture_output=True, text=True, timeout=600)
 
 
-def test_a_leaking_piston_is_found_and_the_report_follows_the_spec(leaky):
+def test_a_leaking_piston_is_found_and_the_report_follows_the_spec(leaky, ssp_path):
     out = leaky / "out"
-    proc = run(leaky / "fit.csv", "--holdout", leaky / "hold.csv", "--out", out, cwd=leaky)
+    proc = run(leaky / "fit.csv", "--holdout", leaky / "hold.csv", "--out", out, "--ssp", ssp_path, cwd=leaky)
     assert proc.returncode == 0, proc.stderr
     doc = json.loads((out / "diagnosis.json").read_text())
     assert set(doc["baseline"]["params"]) == {"K_v", "F_s", "F_d", "F_L", "M"}
@@ -46,6 +46,11 @@ def test_a_leaking_piston_is_found_and_the_report_follows_the_spec(leaky):
     for png in ("overlay_x.png", "overlay_p_a.png", "overlay_p_b.png", "residual_breakdown.png"):
         assert (out / png).stat().st_size > 5000 and png in html
     assert "verdict: ['piston_leakage']" in proc.stdout
+    conf = doc["confirmation"]                  # the FMUs, with the verdict's option, agree
+    assert conf["ssp"] == str(ssp_path) and set(conf["effects"]) == {"piston_leakage"}
+    assert conf["agrees"] and conf["shrink"] > 0.6
+    assert abs(conf["shrink"] - conf["reference_shrink"]) < 0.05
+    assert "Confirmation through the FMUs" in html and "they agree" in html
 
 
 def test_no_holdout_is_refused(leaky):

@@ -52,6 +52,22 @@ def test_piston_leakage_lets_the_chambers_creep_together_conserving_air(fmu):
     assert (5e5 - p["p_a"]) * V_a == pytest.approx((p["p_b"] - 2e5) * V_b, rel=2e-2)
 
 
+def test_turbulent_piston_leakage_is_a_choked_orifice_at_a_large_pressure_ratio(fmu):
+    """p_b / p_a = 0.3 is below the critical ratio: the gap passes the choked flow
+    A p_a sqrt(k / (R T)) (2 / (k + 1))^((k + 1) / (2 (k - 1))), so over 1 ms chamber A
+    (adiabatic) loses k R T mdot dt / V_a of pressure and B gains k R T mdot dt / V_b."""
+    x, A, dt = 0.03, 2e-8, 1e-3
+    V_a, V_b = rig.A_a * x + rig.V_a0, rig.A_b * (rig.L - x) + rig.V_b0
+    k, R, T = rig.k, rig.R, rig.T
+    mdot = A * 5e5 * math.sqrt(k / (R * T)) * (2 / (k + 1)) ** ((k + 1) / (2 * (k - 1)))
+    with FmuInstance(fmu("cylinder")) as cyl:
+        cyl.initialize(dict(A_leak=A, p_a0=5e5, p_b0=1.5e5), inputs=dict(x=x))
+        cyl.step_to(0.0, dt)
+        p = cyl.get("p_a", "p_b")
+    assert 5e5 - p["p_a"] == pytest.approx(k * R * T * mdot * dt / V_a, rel=5e-3)
+    assert p["p_b"] - 1.5e5 == pytest.approx(k * R * T * mdot * dt / V_b, rel=5e-3)
+
+
 def test_heat_transfer_lets_a_filled_chamber_cool_down(fmu):
     """Filled fast, the chamber's air is hot (isentropic compression): with the valve shut
     the pressure falls towards the isothermal value of its air mass."""
@@ -123,7 +139,8 @@ def test_sensor_lag_smooths_what_the_bridge_reports(fmu, tmp_path):
 
 @pytest.mark.parametrize("name, params, culprit", [
     ("valve", {"deadband": 5.0}, "deadband"), ("valve", {"tau_spool": -1e-3}, "tau_spool"),
-    ("cylinder", {"C_leak": -1e-11}, "C_leak"), ("boom_load", {"v_s": -0.01}, "v_s"),
+    ("cylinder", {"C_leak": -1e-11}, "C_leak"), ("cylinder", {"A_leak": -1e-8}, "A_leak"),
+    ("boom_load", {"v_s": -0.01}, "v_s"),
     ("hardware_bridge", {"tau_sensor": -1.0}, "tau_sensor")])
 def test_bad_effect_parameters_are_fmi_errors(fmu, name, params, culprit):
     with FmuInstance(fmu(name)) as inst:

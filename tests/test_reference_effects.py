@@ -12,6 +12,7 @@ from boomfmi.system import simulate_ssp
 CASES = [
     ("valve_deadband", {"width": 0.4}, {"valve.deadband": 0.4}),
     ("heat_transfer", {"h": 50.0}, {"cylinder.h_wall": 50.0}),
+    ("piston_leakage", {"A": 1e-7}, {"cylinder.A_leak": 1e-7}),
     ("end_cushioning", {"length": 0.01, "A_n": 1e-7},
      {"cylinder.l_cushion": 0.01, "cylinder.A_cushion": 1e-7}),
 ]

@@ -9,7 +9,8 @@ to the chamber pressure, the chambers are integrated against that linearisation 
 flow (an exponential integrator, stable however short the chamber's time constant).
 
 Unmodelled effects, off by default (``physics/effects.py``): ``C_leak`` > 0 adds a
-laminar leak across the piston seal (piston_leakage); ``h_wall`` > 0 lets each
+laminar leak across the piston seal, ``A_leak`` > 0 a turbulent one through a gap of
+that area by the orifice law (piston_leakage: whichever law fits the machine); ``h_wall`` > 0 lets each
 chamber's air exchange heat with its wall, relaxing the pressure towards the isothermal
 pressure of its air mass (which the FMU then tracks) with time constant
 m c_v / (h_wall A_wall) (heat_transfer); ``l_cushion`` > 0 makes a chamber's outflow
@@ -24,7 +25,8 @@ from boomfmi_cylinder_lib.physics import (Cylinder as CylinderParams, Gas, Param
                                           check_gas)
 from boomfmi_cylinder_lib.physics import reference_rig as rig
 from boomfmi_cylinder_lib.physics.effects import (chamber_wall_area, cushion_outflow, cushion_outflow_slope,
-                                                  leakage_flow, thermal_relaxation_step,
+                                                  leakage_flow, leakage_orifice_flow,
+                                                  leakage_orifice_slopes, thermal_relaxation_step,
                                                   thermal_time_constant)
 
 
@@ -50,6 +52,7 @@ class Cylinder(BoomSlave):
         parameter("p_a0", rig.P_atm, "Pa", "initial absolute pressure in chamber A", min=0.0),
         parameter("p_b0", rig.P_atm, "Pa", "initial absolute pressure in chamber B", min=0.0),
         parameter("C_leak", 0.0, "kg/(s.Pa)", "piston_leakage: laminar conductance of the piston seal, A to B; 0: off", min=0.0),
+        parameter("A_leak", 0.0, "m2", "piston_leakage: area of a turbulent leak gap across the piston seal (orifice law); 0: off", min=0.0),
         parameter("l_cushion", 0.0, "m", "end_cushioning: cushion length at each end of stroke; 0: off", min=0.0),
         parameter("A_cushion", 1e-7, "m2", "end_cushioning: cushion needle's orifice area", min=0.0),
         parameter("P_e", rig.P_e, "Pa", "end_cushioning: exhaust pressure behind the cushion needle, absolute", min=0.0),
@@ -99,6 +102,11 @@ class Cylinder(BoomSlave):
         q = leakage_flow(self.p_a, self.p_b, self.C_leak)      # held over the step
         mdot_a, mdot_b = mdot_a - q, mdot_b + q
         s_a, s_b = s_a - self.C_leak, s_b - self.C_leak
+        if self.A_leak > 0.0:
+            q = leakage_orifice_flow(self.p_a, self.p_b, self.A_leak, self._gas)
+            g_a, g_b = leakage_orifice_slopes(self.p_a, self.p_b, self.A_leak, self._gas)
+            mdot_a, mdot_b = mdot_a - q, mdot_b + q
+            s_a, s_b = s_a + g_a, s_b + g_b
         p_a = chamber_pressure_step(self.p_a, V_a0, V_a1, mdot_a, dt, self._gas, s_a)
         p_b = chamber_pressure_step(self.p_b, V_b0, V_b1, mdot_b, dt, self._gas, s_b)
         if self.h_wall > 0.0:

@@ -154,7 +154,7 @@ def _identify(args) -> int:
 
 def _diagnose(args) -> int:
     from .diagnose import diagnose
-    doc = diagnose(args.recordings, args.holdout, args.out)
+    doc = diagnose(args.recordings, args.holdout, args.out, ssp=args.ssp)
     if not doc["judgeable"]:
         print(f"cannot judge: {doc['reason']}")
     else:
@@ -167,6 +167,12 @@ def _diagnose(args) -> int:
         for c in doc["effects"][:3]:
             print(f"  {c['name']}: shrink {c['shrink']:.2f}, score {c['score']:.2f}")
         print(f"verdict: {doc['verdict']}")
+        c = doc.get("confirmation") or {}
+        if "shrink" in c:
+            print(f"through the FMUs ({c['ssp']}): shrink {c['shrink']:.2f} against the reference's "
+                  f"{c.get('reference_shrink', float('nan')):.2f}, {'agreeing' if c.get('agrees') else 'DISAGREEING'}")
+        elif "skipped" in c or "error" in c:
+            print(f"not confirmed through the FMUs: {c.get('skipped') or c.get('error')}")
     print(f"wrote {args.out}/diagnosis.json and {args.out}/report.html")
     return 0
 
@@ -237,6 +243,8 @@ def main(argv=None) -> int:
     p.add_argument("--holdout", type=Path, nargs="+", required=True,
                    help="HOLD recordings, never fitted on: every figure of shrink is measured on them")
     p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--ssp", type=Path, default=None,
+                   help="the boom's SSP for confirming the verdict through the FMUs (default: build/excavator_boom.ssp)")
     p.set_defaults(run=_diagnose)
     p = sub.add_parser("view", help="the virtual boom in a browser, from a run file or live; or a video of it")
     source = p.add_mutually_exclusive_group(required=True)

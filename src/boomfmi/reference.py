@@ -28,6 +28,7 @@ from . import physics as ph
 from .physics import reference_rig as rig
 from .physics.effects import cushion_outflow as fx_cushion
 from .physics.effects import deadband_command as fx_deadband
+from .physics.effects import leakage_orifice_flow as fx_leak
 from .physics.effects import sensor_lag_step as fx_sensor
 from .physics.effects import chamber_wall_area as fx_wall
 from .physics.effects import stribeck_load as fx_stribeck
@@ -69,12 +70,12 @@ class Model:
 
 #: Each effect's parameters in ``Model.effects`` (the FMU options' names in brackets):
 #: valve_dynamics tau [s] (valve.tau_spool), valve_deadband width [V] (valve.deadband),
-#: heat_transfer h [W/(m^2 K)] (cylinder.h_wall), piston_leakage C [kg/(s Pa)]
-#: (cylinder.C_leak), stribeck_friction v_s [m/s] (boom_load.v_s), end_cushioning
+#: heat_transfer h [W/(m^2 K)] (cylinder.h_wall), piston_leakage C [kg/(s Pa)] or A
+#: [m^2] (cylinder.C_leak, A_leak), stribeck_friction v_s [m/s] (boom_load.v_s), end_cushioning
 #: length [m], A_n [m^2] (cylinder.l_cushion, A_cushion), sensor_lag tau [s]
 #: (hardware_bridge.tau_sensor).
 EFFECT_PARAMETERS = {"valve_dynamics": ("tau",), "valve_deadband": ("width",),
-                     "heat_transfer": ("h",), "piston_leakage": ("C",),
+                     "heat_transfer": ("h",), "piston_leakage": ("C", "A"),
                      "stribeck_friction": ("v_s",), "end_cushioning": ("length", "A_n"),
                      "sensor_lag": ("tau",)}
 
@@ -104,6 +105,7 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
     h_wall = fx.get("heat_transfer", {}).get("h", 0.0)
     bore = math.sqrt(4.0 * model.cylinder.A_a / math.pi)
     C_leak = fx.get("piston_leakage", {}).get("C", 0.0)
+    A_leak = fx.get("piston_leakage", {}).get("A", 0.0)
     v_s = fx.get("stribeck_friction", {}).get("v_s", 0.0)
     l_c = fx.get("end_cushioning", {}).get("length", 0.0)
     A_n = fx.get("end_cushioning", {}).get("A_n", 0.0)
@@ -124,8 +126,8 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
         if l_c > 0:
             mdot_a = fx_cushion(mdot_a, p_a, x, l_c, A_n, model.valve.P_e, model.gas)
             mdot_b = fx_cushion(mdot_b, p_b, L - x, l_c, A_n, model.valve.P_e, model.gas)
-        if C_leak > 0:
-            q = C_leak * (p_a - p_b)
+        if C_leak > 0 or A_leak > 0:
+            q = C_leak * (p_a - p_b) + fx_leak(p_a, p_b, A_leak, model.gas)
             mdot_a, mdot_b = mdot_a - q, mdot_b + q
         dp_a, dp_b = ph.pressure_rates(p_a, p_b, mdot_a, mdot_b, x, v, model.cylinder, model.gas)
         extra = []

@@ -1,6 +1,7 @@
 """Which unmodelled effect explains the gap, and by how much the model improves.
 
-For each candidate of ``effects.md`` (forms in ``physics/effects.py``): its few
+For each candidate of ``effects.md`` (forms in ``physics/effects.py``; where a
+mechanism has two laws, as a seal's leak, both are fitted and the better kept): its few
 parameters are fitted on the fit recordings, with the baseline load parameters
 re-identified first (``identify.fit``), by output error of the whole model
 (``reference.simulate_reference`` with the effect on) on x, p_a and p_b, each residual
@@ -44,6 +45,9 @@ CANDIDATES = {
     "end_cushioning": [("length", 2e-3, 0.02, False), ("A_n", 1e-8, 4e-6, True)],
     "sensor_lag": [("tau", 2e-4, 0.03, True)],
 }
+#: effects with more than one law for their mechanism: each law is fitted and the one
+#: that fits the fit recordings best is kept (a seal leaks laminar or turbulent)
+FORMS = {"piston_leakage": [CANDIDATES["piston_leakage"], [("A", 1e-10, 2e-7, True)]]}
 NOISE_FACTOR = 3.0
 ABS_FLOOR = 0.002
 MIN_SHRINK = 0.35
@@ -103,14 +107,15 @@ class Candidate:
 
 
 def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = None,
-                fixed: dict | None = None) -> tuple[dict, float]:
+                fixed: dict | None = None, forms: dict | None = None) -> tuple[dict, float]:
     """Fit the parameters of the effects ``names`` together on the fit recordings:
     ``({name: {param: value}}, cost)``.  One parameter: a bounded scalar search.  More:
     Nelder-Mead from ``start`` (``{name: {param: value}}``, e.g. each effect's own fit),
     or else from the best point of a coarse grid (4 levels per parameter), since the
     cost of a two-parameter effect such as the cushion is a narrow valley.  ``fixed``:
-    further effects switched on with their parameters held (returned with the fit)."""
-    spec = [(n, *s) for n in names for s in CANDIDATES[n]]
+    further effects switched on with their parameters held (returned with the fit).
+    ``forms``: {name: [(param, lower, upper, log)]} in place of CANDIDATES[name]."""
+    spec = [(n, *s) for n in names for s in (forms or {}).get(n, CANDIDATES[n])]
 
     def to_effects(z):
         out: dict = {n: dict(p) for n, p in (fixed or {}).items()}
@@ -151,15 +156,26 @@ class Attribution:
 
 def _fit_and_score(args):
     name, values, fit_recs, hold_recs, fixed = args
-    fx, cost = fit_effects([name], values, fit_recs, fixed=fixed)
+    fx, cost = min((fit_effects([name], values, fit_recs, fixed=fixed, forms={name: form})
+                    for form in FORMS.get(name, [CANDIDATES[name]])), key=lambda fit: fit[1])
     return name, fx, cost, mean_errors(values, fx, hold_recs)
 
 
+def _cost(job) -> int:
+    """A fit's rough cost, for scheduling: its parameters times its laws."""
+    name = job[0]
+    return len(CANDIDATES[name]) ** 3 * len(FORMS.get(name, [None]))
+
+
 def _map(fn, jobs, workers):
+    """``fn`` over ``jobs`` in ``workers`` processes, the costliest started first (so
+    that the two-parameter fit does not start last); results in the jobs' order."""
     if workers > 1 and len(jobs) > 1:
+        order = sorted(range(len(jobs)), key=lambda i: -_cost(jobs[i]))
         from concurrent.futures import ProcessPoolExecutor
         with ProcessPoolExecutor(min(workers, len(jobs))) as pool:
-            return list(pool.map(fn, jobs))
+            done = dict(zip(order, pool.map(fn, [jobs[i] for i in order])))
+        return [done[i] for i in range(len(jobs))]
     return [fn(j) for j in jobs]
 
 

@@ -15,19 +15,21 @@ from pathlib import Path
 import numpy as np
 
 from .. import physics as ph
-from ..identify import identify_recordings, simulate_recording
+from ..identify import identify_recordings, nrmse, simulate_recording
 from ..recording import read_recording
 from .._json import plain
 from ..identify import recorded
 from .attribute import CHANNELS, attribute
+from .confirm import AGREEMENT, confirm
 from .localise import localise
 
 MIN_TRAVEL = 1e-3     #: [m] a recording whose piston moves less than this cannot be judged
 
 
-def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None) -> dict:
+def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=None) -> dict:
     """Run the diagnosis and write its outputs into ``out_dir``; return the JSON document.
-    ``workers``: processes for the candidates' fits (default: one per core)."""
+    ``workers``: processes for the candidates' fits (default: one per core); ``ssp``:
+    the boom's system for the FMUs' confirmation (default build/excavator_boom.ssp)."""
     if not hold_paths:
         raise ValueError("diagnose needs at least one holdout recording (--holdout): shrink is measured there")
     out = Path(out_dir)
@@ -51,6 +53,14 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None) -> dict
     values = result.values()
     att = attribute(values, fit_recs, hold_recs, workers=workers)
     hold = hold_recs[0]
+    verdict_fx = {}
+    if att.verdict and att.verdict != ["unexplained"]:
+        best = att.candidates[0]
+        verdict_fx = best.params if "+" in best.name else {best.name: best.params}
+    # the FMUs confirm the result in another process while the report is drawn here
+    from concurrent.futures import ProcessPoolExecutor
+    pool = ProcessPoolExecutor(1)
+    confirming = pool.submit(confirm, values, verdict_fx, hold, None, ssp)
     from ..identify.preprocess import prepare
     prep = prepare(hold)
     base_sim = simulate_recording(values, hold)
@@ -71,11 +81,18 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None) -> dict
            "where": loc.where if loc else [],
            "effects": effects,
            "verdict": att.verdict}
-    after_sim = None
-    if att.verdict and att.verdict != ["unexplained"]:
-        best = att.candidates[0]
-        fx = best.params if "+" in best.name else {best.name: best.params}
-        after_sim = simulate_recording(values, hold, effects=fx)
+    after_sim = simulate_recording(values, hold, effects=verdict_fx) if verdict_fx else None
+    try:
+        doc["confirmation"] = confirming.result()
+    except Exception as e:            # a failing confirmation is reported, not fatal
+        doc["confirmation"] = {"error": f"{type(e).__name__}: {e}"}
+    finally:
+        pool.shutdown()
+    if after_sim is not None and "shrink" in doc["confirmation"]:
+        before, after = nrmse(base_sim, hold), nrmse(after_sim, hold)
+        ref = 1.0 - sum(after.values()) / max(sum(before.values()), 1e-12)
+        doc["confirmation"]["reference_shrink"] = round(ref, 4)
+        doc["confirmation"]["agrees"] = bool(abs(doc["confirmation"]["shrink"] - ref) < AGREEMENT)
     _write(out, doc, hold, base_sim, after_sim, loc)
     return doc
 
@@ -147,6 +164,7 @@ def _html(doc: dict, images: list[str]) -> str:
     params = ", ".join(f"{k} = {v:.4g}" for k, v in (base.get("params") or {}).items())
     before = " / ".join(f"{100 * v:.3f} %" for v in (base.get("nrmse_holdout") or {}).values())
     imgs = "".join(f'<p><img src="{e(n)}" alt="{e(n)}" style="max-width:100%"></p>' for n in images)
+    conf = _confirmation_html(doc.get("confirmation"))
     return f"""<!doctype html><html><head><meta charset="utf-8"><title>boomfmi diagnosis</title>
 <style>body{{font-family:sans-serif;max-width:980px;margin:2em auto}}table{{border-collapse:collapse}}
 td,th{{border:1px solid #ccc;padding:4px 8px;font-size:13px}}</style></head><body>
@@ -158,4 +176,21 @@ Holdout NRMSE p_a / p_b / x: {before}.</p>
 <h2>Where the gap lies</h2><table><tr><th>channel</th><th>regime</th><th>subsystem</th><th>share</th><th>windows [s]</th></tr>{where}</table>
 <h2>Candidate effects, best first</h2><table><tr><th>effect</th><th>fitted parameters</th><th>shrink</th><th>score</th>
 <th>holdout NRMSE after (p_a / p_b / x)</th></tr>{rows}</table>
+{conf}
 </body></html>"""
+
+
+def _confirmation_html(c: dict | None) -> str:
+    if not c:
+        return ""
+    e = html.escape
+    if "skipped" in c or "error" in c:
+        return f"<h2>Confirmation through the FMUs</h2><p>Not done: {e(c.get('skipped') or c.get('error'))}.</p>"
+    pct = lambda d: " / ".join(f"{100 * d[k]:.3f} %" for k in CHANNELS)
+    text = (f"<h2>Confirmation through the FMUs</h2><p>The holdout recording through {e(c['ssp'])} "
+            f"(co-simulated at 1 ms): baseline NRMSE p_a / p_b / x {pct(c['nrmse_holdout_baseline'])}")
+    if "shrink" in c:
+        text += (f"; with the verdict's options {pct(c['nrmse_holdout_after'])}, shrink {c['shrink']:.3f} "
+                 f"against the reference's {c.get('reference_shrink', float('nan')):.3f}: "
+                 + ("<b>they agree</b>" if c.get("agrees") else "<b>they disagree</b>"))
+    return text + ".</p>"

@@ -17,7 +17,10 @@ heat_transfer (cylinder)     h        the air exchanges heat with the chamber's 
                                       isothermal m R T_w / V with time constant
                                       m c_v / (h A_wall), A_wall the wall the air
                                       touches (end faces and barrel)
-piston_leakage (cylinder)    C        laminar leak A -> B: C (p_a - p_b)          C = 0
+piston_leakage (cylinder)    C or A   a leak A -> B across the seal, by one of    C = A = 0
+                                      two laws, whichever fits: laminar
+                                      C (p_a - p_b), or turbulent through a gap
+                                      of area A (the orifice law, Eq. 1)
 stribeck_friction (boom)     v_s      Coulomb level F_d + (F_s - F_d) e^(-|v|/v_s) v_s = 0
 end_cushioning (cylinder)    l_c, A_n within l_c of a chamber's end, its      l_c = 0
                                       outflow passes the cushion needle (area
@@ -86,6 +89,23 @@ def leakage_flow(p_a: float, p_b: float, C: float) -> float:
     """Laminar leakage across the piston seal [kg/s], from A to B (negative B to A):
     ``C (p_a - p_b)`` with conductance ``C`` [kg/(s Pa)]."""
     return C * (p_a - p_b)
+
+
+def leakage_orifice_flow(p_a: float, p_b: float, A: float, gas: Gas = Gas()) -> float:
+    """Turbulent leakage across the piston seal [kg/s], from A to B (negative B to A):
+    a gap of effective area ``A`` [m^2] passing the orifice law (Eq. 1, choked or not)
+    from the higher chamber pressure to the lower; ``A <= 0``: none."""
+    if A <= 0.0:
+        return 0.0
+    return float(signed_mass_flow(A, p_a, p_b, gas))
+
+
+def leakage_orifice_slopes(p_a: float, p_b: float, A: float, gas: Gas = Gas()) -> tuple[float, float]:
+    """d/dp_a of chamber A's leak inflow and d/dp_b of chamber B's [kg/(s Pa)], both
+    <= 0: what the exponential integrator needs for :func:`leakage_orifice_flow`."""
+    if A <= 0.0:
+        return 0.0, 0.0
+    return float(signed_mass_flow_slope(A, p_b, p_a, gas)), float(signed_mass_flow_slope(A, p_a, p_b, gas))
 
 
 def stribeck_load(load: Load, v: float, v_s: float) -> Load:

@@ -1,0 +1,97 @@
+"""The verdict confirmed through the FMUs.
+
+The fits and scores run on the monolithic reference (``reference.py``), which is fast;
+what a user takes away is the FMUs with the verdict's options switched on.  So the
+holdout recording is run once more through the boom's SSP (``build/excavator_boom.ssp``:
+valve, cylinder and boom load, co-simulated at 1 ms by boomfmi's master over fmpy),
+with the re-identified baseline and then with the verdict's effects as FMU parameters,
+and its NRMSE and shrink are compared with the reference's.
+
+Sensor lag is the hardware bridge's option, on the measurement path: on the model's
+side it is the same first-order lag (``physics.effects.sensor_lag_step``) applied to the
+co-simulation's outputs.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..identify import nrmse
+
+#: (effect, candidate parameter) -> the FMU parameter that switches it on
+FMU_PARAMETERS = {
+    ("valve_dynamics", "tau"): "valve.tau_spool",
+    ("valve_deadband", "width"): "valve.deadband",
+    ("heat_transfer", "h"): "cylinder.h_wall",
+    ("piston_leakage", "C"): "cylinder.C_leak",
+    ("piston_leakage", "A"): "cylinder.A_leak",
+    ("stribeck_friction", "v_s"): "boom_load.v_s",
+    ("end_cushioning", "length"): "cylinder.l_cushion",
+    ("end_cushioning", "A_n"): "cylinder.A_cushion",
+}
+LOAD = ("K_v", "F_s", "F_d", "F_L", "M")
+#: the FMUs and the reference agree when their shrinks differ by less than this
+AGREEMENT = 0.1
+
+
+def default_ssp() -> Path:
+    return Path(__file__).resolve().parents[3] / "build" / "excavator_boom.ssp"
+
+
+def fmu_parameters(values: dict, effects: dict, rec) -> dict:
+    """SSP parameters for the holdout ``rec``: the baseline load, the start where the
+    recording starts, and the effects' FMU options."""
+    from ..physics import x_from_alpha
+    from ..physics import reference_rig as rig
+    params = {f"boom_load.{k}": float(values[k]) for k in LOAD if k in values}
+    params["boom_load.x0"] = float(np.clip(x_from_alpha(float(rec.data["alpha"].iloc[0])), 0.0, rig.L))
+    params["cylinder.p_a0"] = float(rec.data["p_a"].iloc[0]) + rec.P_atm
+    params["cylinder.p_b0"] = float(rec.data["p_b"].iloc[0]) + rec.P_atm
+    if "A_max" in values:
+        params["valve.A_max"] = float(values["A_max"])
+    for name, p in effects.items():
+        for k, v in p.items():
+            if (name, k) in FMU_PARAMETERS:
+                params[FMU_PARAMETERS[(name, k)]] = float(v)
+            elif name != "sensor_lag":
+                raise ValueError(f"no FMU parameter for {name}.{k}")
+    return params
+
+
+def run_fmus(ssp, values: dict, effects: dict, rec) -> dict:
+    """The SSP on the recording's command: x, p_a, p_b (gauge) on its samples."""
+    from ..physics.effects import sensor_lag_step
+    from ..simulate import run_experiment
+    out = run_experiment(ssp, str(rec.path), parameters=[fmu_parameters(values, effects, rec)])
+    t = rec.data["t"].to_numpy(float)
+    sim = {c: np.interp(t, out["t"].to_numpy(), out[c].to_numpy()) for c in ("x", "p_a", "p_b")}
+    tau = effects.get("sensor_lag", {}).get("tau", 0.0)
+    if tau > 0:
+        for c, y in sim.items():
+            lagged = np.empty_like(y)
+            lagged[0] = y[0]
+            for i in range(1, len(y)):
+                lagged[i] = sensor_lag_step(lagged[i - 1], y[i], t[i] - t[i - 1], tau)
+            sim[c] = lagged
+    return sim
+
+
+def confirm(values: dict, effects: dict, rec, reference_shrink: float | None, ssp=None) -> dict:
+    """The holdout ``rec`` through the FMUs, baseline and (where ``effects``) with the
+    verdict's options: NRMSE per channel, shrink, and whether it agrees with the
+    reference's ``reference_shrink``."""
+    ssp = Path(ssp) if ssp is not None else default_ssp()
+    if not ssp.is_file():
+        return {"ssp": str(ssp), "skipped": "the SSP is not built (python build_fmus.py)"}
+    before = nrmse(run_fmus(ssp, values, {}, rec), rec)
+    doc = {"ssp": str(ssp), "recording": str(rec.path),
+           "nrmse_holdout_baseline": {k: round(v, 6) for k, v in before.items()}}
+    if effects:
+        after = nrmse(run_fmus(ssp, values, effects, rec), rec)
+        shrink = 1.0 - sum(after.values()) / max(sum(before.values()), 1e-12)
+        doc.update({"effects": effects, "nrmse_holdout_after": {k: round(v, 6) for k, v in after.items()},
+                    "shrink": round(shrink, 4)})
+        if reference_shrink is not None:
+            doc["agrees"] = bool(abs(shrink - reference_shrink) < AGREEMENT)
+    return doc
