@@ -82,15 +82,16 @@ def test_observer_ignores_a_push_into_an_end_stop(make):
 
 
 def test_observer_while_sliding_at_constant_speed(make):
-    """x rising at 50 mm/s: Eq. 8 with viscous and Coulomb friction, no inertia."""
-    est = make(method="observer", tau_est=0.0)
+    """x rising at 50 mm/s: Eq. 8 with viscous and Coulomb friction, no inertia; the
+    known forces pass the motion's filter, whose delay on a ramp is 2 / omega."""
+    est = make(method="observer", tau_est=0.0, f_motion=30.0)
     v, p_a, p_b = 0.05, 5e5, 1e5
     est.set(p_a_measured=p_a, p_b_measured=p_b)
     for k in range(400):
         est.set(x_measured=0.01 + v * k * DT)
         est.step(DT)
     got = est.get("f_est", "v_measured")
-    x = 0.01 + v * 399 * DT
+    x = 0.01 + v * 399 * DT - v * 2.0 / (2 * math.pi * 30.0)
     phi = ph.phi_from_x(x, ph.Geometry())
     expected = (ph.piston_force(p_a + rig.P_atm, p_b + rig.P_atm) - rig.F_L * math.sin(phi)
                 - rig.K_v * v - rig.F_d * math.cos(phi))

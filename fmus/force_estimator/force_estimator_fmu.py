@@ -7,8 +7,9 @@ like f_ext (``physics/force_estimation.py``):
   v_measured)``, K the model's pneumatic stiffness k (p_a A_a^2/V_a + p_b A_b^2/V_b) at
   its current pressures and position (``K_p`` = 0), or a calibrated ``K_p`` > 0;
 * ``observer``: Eq. 8 read backwards from the machine's measured pressures and motion
-  with the identified load parameters; at rest only the force that static friction
-  cannot hold is reported.
+  with the identified load parameters, the pressures' force filtered like the motion
+  (the same delay on both sides); at rest only the force that static friction cannot
+  hold is reported.
 
 The measured position passes a critically damped second-order filter (``f_motion``)
 that gives the machine's velocity (output ``v_measured``, the mean over the last
@@ -23,7 +24,7 @@ import math
 from boomfmi_force_estimator_lib.fmislave import BoomSlave, input, output, parameter
 from boomfmi_force_estimator_lib.physics import (Cylinder, Gas, Geometry, Load, ParameterError,
                                                  check_cylinder, check_gas, check_geometry, check_load,
-                                                 motion_filter_step, low_pass_step,
+                                                 measured_drive_force, motion_filter_step, low_pass_step,
                                                  observed_external_force, pneumatic_stiffness,
                                                  position_error_force, reflected_force)
 from boomfmi_force_estimator_lib.physics import reference_rig as rig
@@ -48,7 +49,7 @@ class ForceEstimator(BoomSlave):
         parameter("method", "observer", "1", "position_error (the paper's) or observer", type="String"),
         parameter("K_p", 0.0, "N/m", "position_error: calibrated stiffness; 0: the model's pneumatic stiffness at its state", min=0.0),
         parameter("D", rig.K_v, "N.s/m", "position_error: velocity-error gain; default the viscous friction K_v", min=0.0),
-        parameter("f_motion", 40.0, "Hz", "corner frequency of the critically damped filter of the measured position", min=0.0),
+        parameter("f_motion", 30.0, "Hz", "corner frequency of the critically damped filter of the measured position", min=0.0),
         parameter("tau_est", 0.004, "s", "time constant of the estimate's low-pass; 0: none", min=0.0),
         parameter("v_rest", 2e-3, "m/s", "observer: below this filtered speed the piston counts as at rest", min=0.0),
         parameter("gain", 0.05, "1", "joystick force per estimated force", min=0.0),
@@ -97,14 +98,19 @@ class ForceEstimator(BoomSlave):
         self._started = False
 
     def step(self, t, dt):
-        if not self._started:               # the filter starts at rest at the first measurement
+        p_a, p_b = self.p_a_measured + self.P_atm, self.p_b_measured + self.P_atm
+        drive = measured_drive_force(p_a, p_b, self.x_measured, self._cyl, self._geom, self._load, self.P_atm)
+        if not self._started:               # the filters start at rest at the first measurement
             self._x_f, self._v_f, self._started = self.x_measured, 0.0, True
+            self._d_f, self._dd_f = drive, 0.0
         self._x_f, self._v_f, self.v_measured, a = motion_filter_step(self._x_f, self._v_f, self.x_measured,
                                                                       dt, self._omega)
         if self.method == "observer":
-            force = observed_external_force(self.p_a_measured + self.P_atm, self.p_b_measured + self.P_atm,
-                                            self.x_measured, self.v_measured, a, self._cyl, self._geom,
-                                            self._load, self.P_atm, self.v_rest)
+            d_0 = self._d_f                 # the known forces through the same filter: same delay
+            self._d_f, self._dd_f, _, _ = motion_filter_step(self._d_f, self._dd_f, drive, dt, self._omega)
+            force = observed_external_force(p_a, p_b, self.x_measured, self.v_measured, a, self._cyl,
+                                            self._geom, self._load, self.P_atm, self.v_rest,
+                                            drive=0.5 * (d_0 + self._d_f))
         else:
             x_m = min(max(self.x_model, 0.0), self.L)
             K = self.K_p or pneumatic_stiffness(self.p_a_model, self.p_b_model, x_m, self._cyl, self._gas)

@@ -18,7 +18,9 @@ sensors give: the chamber pressures and the measured motion::
     f_ext = P_a A_a - P_b A_b - P_atm (A_a - A_b) - F_L sin(phi) - K_v v - F_c - M a
 
 with v and a from a critically damped second-order filter of the measured position
-(:func:`motion_filter_step`) and the result low-passed (:func:`low_pass_step`).  The
+(:func:`motion_filter_step`), the known forces (:func:`measured_drive_force`) through
+the same filter so that both sides carry the same delay, and the result low-passed
+(:func:`low_pass_step`).  The
 friction F_c is Eq. 9's: ``F_d cos(phi)`` against the motion while sliding.  At rest
 Eq. 9 lets friction hold any force up to ``F_s cos(phi)``, which no sensor can tell
 apart from an external force; the observer then reports only what friction cannot
@@ -79,10 +81,24 @@ def low_pass_step(y: float, target: float, dt: float, tau: float) -> float:
     return target + (y - target) * math.exp(-dt / tau)
 
 
+def measured_drive_force(p_a: float, p_b: float, x: float, cyl: Cylinder = Cylinder(),
+                         geom: Geometry = Geometry(), load: Load = Load(),
+                         P_atm: float = 101_325.0) -> float:
+    """The known forces on the piston [N, positive extending] from what the machine
+    measures: the air's (absolute pressures ``p_a``, ``p_b`` [Pa]) less the boom's
+    weight, ``piston_force - F_L sin(phi)`` at position ``x`` [m].  The observer passes
+    it through the same filter as the position, so that it and ``M a`` carry the same
+    delay: on a sharp acceleration the filtered acceleration lags the pressures, and
+    the gap would read as a force."""
+    phi = phi_from_x(min(max(x, 0.0), cyl.L), geom)
+    return piston_force(p_a, p_b, cyl, P_atm) - load.F_L * math.sin(phi)
+
+
 def observed_external_force(p_a: float, p_b: float, x: float, v: float, a: float,
                             cyl: Cylinder = Cylinder(), geom: Geometry = Geometry(),
                             load: Load = Load(), P_atm: float = 101_325.0,
-                            v_rest: float = 2e-3, x_stop: float = 5e-4) -> float:
+                            v_rest: float = 2e-3, x_stop: float = 5e-4,
+                            drive: float | None = None) -> float:
     """The external force [N, positive against extension] that Eq. 8 needs to explain
     the measured absolute pressures ``p_a``, ``p_b`` [Pa], position ``x`` [m], velocity
     ``v`` [m/s] and acceleration ``a`` [m/s^2].
@@ -90,10 +106,13 @@ def observed_external_force(p_a: float, p_b: float, x: float, v: float, a: float
     Below ``v_rest`` [m/s] the piston counts as at rest: the force friction can hold
     (``F_s cos(phi)``) is taken off the unexplained force, towards zero.  Within
     ``x_stop`` [m] of an end stop, a force towards that stop is the stop's reaction and
-    is not reported."""
+    is not reported.  ``drive`` [N], where given, stands for the known forces
+    (:func:`measured_drive_force` of ``p_a``, ``p_b``, ``x``), filtered like the motion."""
     phi = phi_from_x(min(max(x, 0.0), cyl.L), geom)
     c = math.cos(phi)
-    residual = piston_force(p_a, p_b, cyl, P_atm) - load.F_L * math.sin(phi) - load.M * a
+    if drive is None:
+        drive = piston_force(p_a, p_b, cyl, P_atm) - load.F_L * math.sin(phi)
+    residual = drive - load.M * a
     if abs(v) > v_rest:
         f = residual - load.K_v * v - math.copysign(load.F_d * c, v)
     else:
