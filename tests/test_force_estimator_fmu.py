@@ -99,6 +99,23 @@ def test_observer_while_sliding_at_constant_speed(make):
     assert got["f_est"] == pytest.approx(expected, abs=0.5)
 
 
+@pytest.mark.parametrize("p_floor, seen", [(0.0, -0.5e5), (-1e6, 0.0)])
+def test_a_reading_at_the_sensors_floor_gives_way_to_the_models_vacuum(make, p_floor, seen):
+    """Chamber B at -0.5 bar gauge reads 0 on a 0 to 10 bar sensor: the observer takes
+    the model's -0.5 bar, unless the floor is switched off."""
+    est = make(method="observer", tau_est=0.0, p_floor=p_floor)
+    v, p_a = -0.05, 0.3e5
+    est.set(p_a_measured=p_a, p_b_measured=0.0, p_a_model=p_a + rig.P_atm, p_b_model=rig.P_atm - 0.5e5)
+    for k in range(400):
+        est.set(x_measured=0.05 + v * k * DT)
+        est.step(DT)
+    x = 0.05 + v * 399 * DT - v * 2.0 / (2 * math.pi * 30.0)
+    phi = ph.phi_from_x(x, ph.Geometry())
+    expected = (ph.piston_force(p_a + rig.P_atm, seen + rig.P_atm) - rig.F_L * math.sin(phi)
+                - rig.K_v * v + rig.F_d * math.cos(phi))
+    assert est.get("f_est")["f_est"] == pytest.approx(expected, abs=0.5)
+
+
 def test_reflected_force_is_rate_limited_then_saturated(make):
     est = make(method="position_error", tau_est=0.0, K_p=2e4, gain=0.05, f_max=20.0, rate_max=500.0)
     est.set(x_model=0.05, x_measured=0.0)            # f_est = 1000 N -> target 50 N > f_max

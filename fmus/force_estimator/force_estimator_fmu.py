@@ -9,7 +9,8 @@ like f_ext (``physics/force_estimation.py``):
 * ``observer``: Eq. 8 read backwards from the machine's measured pressures and motion
   with the identified load parameters, the pressures' force filtered like the motion
   (the same delay on both sides); at rest only the force that static friction cannot
-  hold is reported.
+  hold is reported; a pressure reading at the sensor's floor (``p_floor``, 0 Pa gauge)
+  gives way to the model's where that is lower (vacuum).
 
 The measured position passes a critically damped second-order filter (``f_motion``)
 that gives the machine's velocity (output ``v_measured``, the mean over the last
@@ -22,7 +23,7 @@ inputs held over it (no direct feedthrough, so no algebraic loop in any coupling
 import math
 
 from boomfmi_force_estimator_lib.fmislave import BoomSlave, input, output, parameter
-from boomfmi_force_estimator_lib.physics import (Cylinder, Gas, Geometry, Load, ParameterError,
+from boomfmi_force_estimator_lib.physics import (Cylinder, Gas, Geometry, Load, ParameterError, below_sensor_floor,
                                                  check_cylinder, check_gas, check_geometry, check_load,
                                                  measured_drive_force, motion_filter_step, low_pass_step,
                                                  observed_external_force, pneumatic_stiffness,
@@ -38,8 +39,8 @@ class ForceEstimator(BoomSlave):
     variables = (
         input("x_model", 0.0, "m", "position_error: piston position of the model"),
         input("v_model", 0.0, "m/s", "position_error: piston velocity of the model"),
-        input("p_a_model", rig.P_atm, "Pa", "position_error: absolute chamber A pressure of the model (its stiffness)", min=0.0),
-        input("p_b_model", rig.P_atm, "Pa", "position_error: absolute chamber B pressure of the model (its stiffness)", min=0.0),
+        input("p_a_model", rig.P_atm, "Pa", "absolute chamber A pressure of the model (position_error: its stiffness; observer: below the sensor's floor)", min=0.0),
+        input("p_b_model", rig.P_atm, "Pa", "absolute chamber B pressure of the model (position_error: its stiffness; observer: below the sensor's floor)", min=0.0),
         input("x_measured", 0.0, "m", "piston position of the machine"),
         input("p_a_measured", 0.0, "Pa", "observer: measured chamber A pressure, gauge (as the bridge gives it)"),
         input("p_b_measured", 0.0, "Pa", "observer: measured chamber B pressure, gauge (as the bridge gives it)"),
@@ -52,6 +53,7 @@ class ForceEstimator(BoomSlave):
         parameter("f_motion", 30.0, "Hz", "corner frequency of the critically damped filter of the measured position", min=0.0),
         parameter("tau_est", 0.004, "s", "time constant of the estimate's low-pass; 0: none", min=0.0),
         parameter("v_rest", 2e-3, "m/s", "observer: below this filtered speed the piston counts as at rest", min=0.0),
+        parameter("p_floor", 0.0, "Pa", "observer: the pressure sensors' lower limit, gauge (0: a 0 to 10 bar gauge transducer, blind to vacuum); a reading at it gives way to the model's lower pressure; -1e5 or less: off"),
         parameter("gain", 0.05, "1", "joystick force per estimated force", min=0.0),
         parameter("f_max", 20.0, "N", "joystick force saturation", min=0.0),
         parameter("rate_max", 500.0, "N/s", "joystick force rate limit", min=0.0),
@@ -98,7 +100,8 @@ class ForceEstimator(BoomSlave):
         self._started = False
 
     def step(self, t, dt):
-        p_a, p_b = self.p_a_measured + self.P_atm, self.p_b_measured + self.P_atm
+        p_a = below_sensor_floor(self.p_a_measured, self.p_a_model - self.P_atm, self.p_floor) + self.P_atm
+        p_b = below_sensor_floor(self.p_b_measured, self.p_b_model - self.P_atm, self.p_floor) + self.P_atm
         drive = measured_drive_force(p_a, p_b, self.x_measured, self._cyl, self._geom, self._load, self.P_atm)
         if not self._started:               # the filters start at rest at the first measurement
             self._x_f, self._v_f, self._started = self.x_measured, 0.0, True

@@ -7,7 +7,7 @@ name of that FMU's own.
 """
 from . import effects, reference_rig
 from .chamber import chamber_inflows, chamber_pressure_step, chamber_volumes, pressure_rates
-from .force_estimation import (low_pass_step, measured_drive_force, motion_filter_step,
+from .force_estimation import (below_sensor_floor, low_pass_step, measured_drive_force, motion_filter_step,
                                observed_external_force, pneumatic_stiffness, position_error_force,
                                reflected_force)
 from .geometry import (alpha_from_x, check_geometry, cylinder_length, lever_arm, linkage_points,
@@ -24,7 +24,7 @@ from .valve import chamber_flow_slopes, chamber_flows, orifice_area
 __all__ = [
     "effects", "reference_rig", "chamber_pressure_step", "chamber_volumes", "pressure_rates",
     "pneumatic_stiffness", "position_error_force", "reflected_force", "low_pass_step",
-    "motion_filter_step", "observed_external_force", "measured_drive_force", "alpha_from_x",
+    "motion_filter_step", "observed_external_force", "measured_drive_force", "below_sensor_floor", "alpha_from_x",
     "check_geometry", "cylinder_length", "phi_from_x", "x_from_alpha", "linkage_points", "lever_arm",
     "acceleration",
     "advance_load", "drive_force", "friction_force", "piston_force", "slide_or_stick",

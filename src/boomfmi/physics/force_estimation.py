@@ -27,7 +27,9 @@ apart from an external force; the observer then reports only what friction canno
 hold (:func:`observed_external_force`), so a boom held still in free air shows no
 force, and a bucket pressed into the ground shows the push beyond the static friction.
 At an end stop the stop's reaction is likewise indistinguishable from a force towards
-the stop, so only a force away from the stop is reported.
+the stop, so only a force away from the stop is reported.  A gauge transducer cannot
+read below atmospheric: where a chamber's reading sits at the sensor's floor, the
+model's pressure stands in when it is lower (:func:`below_sensor_floor`).
 
 The joystick receives ``f_reflect``: ``f_est`` scaled, saturated and rate-limited
 (:func:`reflected_force`).
@@ -92,6 +94,15 @@ def measured_drive_force(p_a: float, p_b: float, x: float, cyl: Cylinder = Cylin
     the gap would read as a force."""
     phi = phi_from_x(min(max(x, 0.0), cyl.L), geom)
     return piston_force(p_a, p_b, cyl, P_atm) - load.F_L * math.sin(phi)
+
+
+def below_sensor_floor(p_measured, p_model, p_floor):
+    """A chamber pressure for the observer [Pa, gauge]: the measured ``p_measured``,
+    unless it sits at or below the sensor's lower limit ``p_floor`` (a 0 to 10 bar gauge
+    transducer reads 0 for any vacuum) while the model beside the machine has a lower
+    ``p_model``; then the model's, the better guess of a pressure the sensor cannot
+    show."""
+    return p_model if (p_measured <= p_floor and p_model < p_measured) else p_measured
 
 
 def observed_external_force(p_a: float, p_b: float, x: float, v: float, a: float,
