@@ -219,6 +219,74 @@ def _windows(preps, L, before=0.2, after=0.1, base=None, cyl=None, P_atm=None):
     return out
 
 
+_SCAN: dict = {}
+
+
+def _scan_cost(value: float) -> float:
+    return _SCAN["cost"](value)
+
+
+def scan(cost, grid) -> list[float]:
+    """``cost`` at every point of ``grid``, on every core where the platform forks
+    (the workers inherit ``cost`` and its data; only numbers cross), else in turn."""
+    import multiprocessing
+    import os
+    workers = min(os.cpu_count() or 1, len(grid))
+    if workers < 2 or "fork" not in multiprocessing.get_all_start_methods():
+        return [cost(g) for g in grid]
+    from concurrent.futures import ProcessPoolExecutor
+    _SCAN["cost"] = cost
+    try:
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
+            return list(pool.map(_scan_cost, grid, chunksize=max(1, len(grid) // (2 * workers))))
+    finally:
+        _SCAN.clear()
+
+
+def _run_part(args):
+    k, theta = args
+    return _SCAN["part"](k, theta)
+
+
+class _Parts:
+    """``part(k, theta)`` for k = 0 .. n - 1 evaluated side by side in forked workers
+    (each inherits ``part`` and its data once; only parameters and results cross), or
+    in turn where the platform does not fork.  A context manager: ``with _Parts(part, n)
+    as run: run(theta) -> [part(0, theta), ...]``."""
+
+    def __init__(self, part, n: int):
+        import multiprocessing
+        self.part, self.n, self.pool = part, n, None
+        if n > 1 and "fork" in multiprocessing.get_all_start_methods():
+            from concurrent.futures import ProcessPoolExecutor
+            _SCAN["part"] = part
+            self.pool = ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("fork"))
+
+    def __call__(self, theta) -> list:
+        if self.pool is None:
+            return [self.part(k, theta) for k in range(self.n)]
+        return list(self.pool.map(_run_part, [(k, theta) for k in range(self.n)]))
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if self.pool is not None:
+            self.pool.shutdown()
+            _SCAN.pop("part", None)
+
+
+def _balanced(sizes: list, n: int) -> list[list[int]]:
+    """The indices of ``sizes`` dealt into ``n`` ascending lists of about equal total
+    size (the largest first, each to the lightest list)."""
+    parts, load = [[] for _ in range(n)], [0] * n
+    for i in sorted(range(len(sizes)), key=lambda i: -sizes[i]):
+        k = load.index(min(load))
+        parts[k].append(i)
+        load[k] += sizes[i]
+    return [sorted(part) for part in parts]
+
+
 def fit_static_friction(preps, base: dict, cyl, geom, P_atm, L):
     """Stage 2: F_s by matching simulated starts to recorded ones."""
     all_starts = len(_windows(preps, L))
@@ -239,7 +307,7 @@ def fit_static_friction(preps, base: dict, cyl, geom, P_atm, L):
     # the cost is rough (starts happen on a time grid), so scan first, then refine
     # around the best point of the scan
     grid = np.linspace(lo, hi, 41)
-    costs = [cost(g) for g in grid]
+    costs = scan(cost, grid)
     j = int(np.argmin(costs))
     step = grid[1] - grid[0]
     res = minimize_scalar(cost, bounds=(max(lo, grid[j] - step), min(hi, grid[j] + step)),
@@ -271,14 +339,24 @@ def refine(preps, start: dict, cyl, geom, P_atm, L):
             segments.append((p, i0, i1, x0, np.abs(p.x_raw[i0:i1] - reading) > DEPARTED))
     names = ("K_v", "F_d", "F_L", "M")
     x0 = np.array([start[k] for k in names])
+    import os
+    n = max(1, min(os.cpu_count() or 1, len(segments)))
+    dealt = _balanced([i1 - i0 for _, i0, i1, _, _ in segments], n)
+    parts = [[segments[i] for i in idx] for idx in dealt]
+    order = np.argsort(np.concatenate(dealt))     # back to the segments' own order
 
-    def residuals(theta):
+    def part_residuals(k, theta):
         load = ph.Load(F_s=start["F_s"], **dict(zip(names, theta)))
-        return np.concatenate([(simulate_load(p, load, cyl, geom, P_atm, i0, i1, xs) - p.x_raw[i0:i1])[moved]
-                               for p, i0, i1, xs, moved in segments])
+        return [(simulate_load(p, load, cyl, geom, P_atm, i0, i1, xs) - p.x_raw[i0:i1])[moved]
+                for p, i0, i1, xs, moved in parts[k]]
 
-    res = least_squares(residuals, x0, x_scale=np.abs(x0) + 1e-9, bounds=(1e-9, np.inf),
-                        diff_step=1e-3, max_nfev=60)
+    with _Parts(part_residuals, n) as run:
+        def residuals(theta):
+            pieces = [r for part in run(theta) for r in part]
+            return np.concatenate([pieces[i] for i in order])
+
+        res = least_squares(residuals, x0, x_scale=np.abs(x0) + 1e-9, bounds=(1e-9, np.inf),
+                            diff_step=1e-3, max_nfev=60)
     J = res.jac
     dof = max(len(res.fun) - len(names), 1)
     sigma2 = float(res.fun @ res.fun) / dof
