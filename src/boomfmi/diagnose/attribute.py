@@ -140,7 +140,7 @@ def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = N
             levels = [np.linspace(lo, hi, 6)[1:-1] for lo, hi in bounds]
             z0 = list(min(itertools.product(*levels), key=cost))
         res = minimize(cost, z0, method="Nelder-Mead", bounds=bounds,
-                       options={"maxfev": 60, "xatol": 1e-3, "fatol": 1e-9})
+                       options={"maxfev": 40, "xatol": 1e-3, "fatol": 1e-9})
         z, fun = res.x, res.fun
     return to_effects(z), float(fun)
 
