@@ -10,7 +10,7 @@ Unmodelled effect, off by default (``physics/effects.py``): ``v_s`` > 0 makes th
 Coulomb friction fall from F_s to F_d as speed rises (stribeck_friction).  The end
 cushioning acts on the exhaust air, so it is the cylinder's option.
 """
-from boomfmi_boom_load_lib.fmislave import BoomSlave, input, output, parameter
+from boomfmi_boom_load_lib.fmislave import GEOMETRY, LOAD, BoomSlave, input, output, parameter, rig_parameters
 from boomfmi_boom_load_lib.physics import (Cylinder, Geometry, Load, ParameterError, advance_load,
                                            alpha_from_x, check_geometry, check_load, phi_from_x)
 from boomfmi_boom_load_lib.physics import reference_rig as rig
@@ -28,19 +28,7 @@ class BoomLoad(BoomSlave):
         output("v", 0.0, "m/s", "piston velocity, positive extending"),
         output("alpha", 0.0, "rad", "boom angle (Eq. 12)"),
         output("phi", 0.0, "rad", "angle between the cylinder axis and the horizontal (Eq. 10)"),
-        parameter("K_v", rig.K_v, "N.s/m", "viscous friction coefficient", min=0.0),
-        parameter("F_s", rig.F_s, "N", "static friction force", min=0.0),
-        parameter("F_d", rig.F_d, "N", "Coulomb friction force", min=0.0),
-        parameter("F_L", rig.F_L, "N", "load force from the backhoe's weight, acting as F_L sin(phi)"),
-        parameter("M", rig.M, "kg", "moving mass reduced to the piston", min=0.0),
-        parameter("a", rig.a, "m", "boom geometry a (Eq. 10, 12)", min=0.0),
-        parameter("b", rig.b, "m", "boom geometry b (Eq. 10, 12)", min=0.0),
-        parameter("h", rig.h, "m", "boom geometry h (Eq. 10)", min=0.0),
-        parameter("l_min", rig.l_min, "m", "cylinder length at x = 0 (Eq. 11)", min=0.0),
-        parameter("L", rig.L, "m", "stroke", min=0.0),
-        parameter("A_a", rig.A_a, "m2", "cap-side piston area", min=0.0),
-        parameter("A_b", rig.A_b, "m2", "rod-side annulus area", min=0.0),
-        parameter("P_atm", rig.P_atm, "Pa", "atmospheric pressure acting on the rod", min=0.0),
+        *rig_parameters(*LOAD, *GEOMETRY, "A_a", "A_b", "P_atm"),
         parameter("x0", 0.0, "m", "initial piston position", min=0.0),
         parameter("v_s", 0.0, "m/s", "stribeck_friction: Stribeck velocity of exp(-|v|/v_s); 0: off (the paper's step)", min=0.0),
     )

@@ -19,7 +19,7 @@ within that distance of its end of stroke also pass the cushion needle of area
 """
 import math
 
-from boomfmi_cylinder_lib.fmislave import BoomSlave, input, output, parameter
+from boomfmi_cylinder_lib.fmislave import CYLINDER, BoomSlave, input, output, parameter, rig_parameters
 from boomfmi_cylinder_lib.physics import (Cylinder as CylinderParams, Gas, ParameterError,
                                           chamber_pressure_step, chamber_volumes, check_cylinder,
                                           check_gas)
@@ -41,14 +41,7 @@ class Cylinder(BoomSlave):
         input("dmdot_b_dp_b", 0.0, "kg/(s.Pa)", "slope of mdot_b with respect to p_b; 0 holds mdot_b over the step", max=0.0),
         output("p_a", rig.P_atm, "Pa", "absolute pressure in chamber A (cap side)", min=0.0),
         output("p_b", rig.P_atm, "Pa", "absolute pressure in chamber B (rod side)", min=0.0),
-        parameter("A_a", rig.A_a, "m2", "cap-side piston area", min=0.0),
-        parameter("A_b", rig.A_b, "m2", "rod-side annulus area", min=0.0),
-        parameter("L", rig.L, "m", "stroke", min=0.0),
-        parameter("V_a0", rig.V_a0, "m3", "dead volume of chamber A incl. port and hose", min=0.0),
-        parameter("V_b0", rig.V_b0, "m3", "dead volume of chamber B incl. port and hose", min=0.0),
-        parameter("k", rig.k, "1", "ratio of specific heats of air", min=1.0),
-        parameter("R", rig.R, "J/(kg.K)", "specific gas constant of air", min=0.0),
-        parameter("T", rig.T, "K", "air temperature", min=0.0),
+        *rig_parameters(*CYLINDER, "k", "R", "T"),
         parameter("p_a0", rig.P_atm, "Pa", "initial absolute pressure in chamber A", min=0.0),
         parameter("p_b0", rig.P_atm, "Pa", "initial absolute pressure in chamber B", min=0.0),
         parameter("C_leak", 0.0, "kg/(s.Pa)", "piston_leakage: laminar conductance of the piston seal, A to B; 0: off", min=0.0),

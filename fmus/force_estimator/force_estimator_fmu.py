@@ -22,7 +22,8 @@ inputs held over it (no direct feedthrough, so no algebraic loop in any coupling
 """
 import math
 
-from boomfmi_force_estimator_lib.fmislave import BoomSlave, input, output, parameter
+from boomfmi_force_estimator_lib.fmislave import (CYLINDER, GEOMETRY, LOAD,
+                                                  BoomSlave, input, output, parameter, rig_parameters)
 from boomfmi_force_estimator_lib.physics import (Cylinder, Gas, Geometry, Load, ParameterError, below_sensor_floor,
                                                  check_cylinder, check_gas, check_geometry, check_load,
                                                  measured_drive_force, motion_filter_step, low_pass_step,
@@ -57,22 +58,7 @@ class ForceEstimator(BoomSlave):
         parameter("gain", 0.05, "1", "joystick force per estimated force", min=0.0),
         parameter("f_max", 20.0, "N", "joystick force saturation", min=0.0),
         parameter("rate_max", 500.0, "N/s", "joystick force rate limit", min=0.0),
-        parameter("K_v", rig.K_v, "N.s/m", "viscous friction coefficient", min=0.0),
-        parameter("F_s", rig.F_s, "N", "static friction force", min=0.0),
-        parameter("F_d", rig.F_d, "N", "Coulomb friction force", min=0.0),
-        parameter("F_L", rig.F_L, "N", "load force from the backhoe's weight, acting as F_L sin(phi)"),
-        parameter("M", rig.M, "kg", "moving mass reduced to the piston", min=0.0),
-        parameter("A_a", rig.A_a, "m2", "cap-side piston area", min=0.0),
-        parameter("A_b", rig.A_b, "m2", "rod-side annulus area", min=0.0),
-        parameter("L", rig.L, "m", "stroke", min=0.0),
-        parameter("V_a0", rig.V_a0, "m3", "dead volume of chamber A incl. port and hose", min=0.0),
-        parameter("V_b0", rig.V_b0, "m3", "dead volume of chamber B incl. port and hose", min=0.0),
-        parameter("k", rig.k, "1", "ratio of specific heats of air", min=1.0),
-        parameter("P_atm", rig.P_atm, "Pa", "atmospheric pressure", min=0.0),
-        parameter("a", rig.a, "m", "boom geometry a (Eq. 10, 12)", min=0.0),
-        parameter("b", rig.b, "m", "boom geometry b (Eq. 10, 12)", min=0.0),
-        parameter("h", rig.h, "m", "boom geometry h (Eq. 10)", min=0.0),
-        parameter("l_min", rig.l_min, "m", "cylinder length at x = 0 (Eq. 11)", min=0.0),
+        *rig_parameters(*LOAD, *CYLINDER, "k", "P_atm", *GEOMETRY),
     )
 
     def __init__(self, **kwargs):

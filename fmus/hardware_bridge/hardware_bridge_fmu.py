@@ -30,7 +30,7 @@ so x) through a first-order lag, the sensors and their conditioning (sensor_lag,
 import bisect
 import time
 
-from boomfmi_hardware_bridge_lib.fmislave import BoomSlave, input, output, parameter
+from boomfmi_hardware_bridge_lib.fmislave import GEOMETRY, BoomSlave, input, output, parameter, rig_parameters
 from boomfmi_hardware_bridge_lib.link.client import RigClient, parse_address
 from boomfmi_hardware_bridge_lib.link.protocol import LinkError, load_key
 from boomfmi_hardware_bridge_lib.physics import Geometry, ParameterError, check_geometry, x_from_alpha
@@ -74,11 +74,7 @@ class HardwareBridge(BoomSlave):
         parameter("timeout", 0.05, "s", "udp mode: longest wait for an answer in one step (retries included)", min=0.0),
         parameter("retries", 2, "1", "udp mode: resends of a command within the timeout", type="Integer", min=0),
         parameter("loss_budget", 20, "1", "udp mode: consecutive lost answers tolerated before fmi2Error", type="Integer", min=0),
-        parameter("a", rig.a, "m", "boom geometry a (Eq. 12)", min=0.0),
-        parameter("b", rig.b, "m", "boom geometry b (Eq. 12)", min=0.0),
-        parameter("h", rig.h, "m", "boom geometry h (Eq. 10)", min=0.0),
-        parameter("l_min", rig.l_min, "m", "cylinder length at x = 0 (Eq. 11)", min=0.0),
-        parameter("L", rig.L, "m", "stroke", min=0.0),
+        *rig_parameters(*GEOMETRY),
         parameter("tau_sensor", 0.0, "s", "sensor_lag: time constant of a first-order lag on every measured channel; 0: off", min=0.0),
     )
 

@@ -12,7 +12,7 @@ spool follow the command with a first-order lag (valve_dynamics; the spool posit
 then the FMU's state), ``deadband`` > 0 closes a band of commands around 5 V
 (valve_deadband).
 """
-from boomfmi_valve_lib.fmislave import BoomSlave, input, output, parameter
+from boomfmi_valve_lib.fmislave import BoomSlave, input, output, parameter, rig_parameters
 from boomfmi_valve_lib.physics import (Gas, Valve as ValveParams, chamber_flow_slopes, chamber_flows,
                                        check_gas, check_valve)
 from boomfmi_valve_lib.physics import reference_rig as rig
@@ -29,12 +29,9 @@ class Valve(BoomSlave):
         output("mdot_b", 0.0, "kg/s", "mass flow into chamber B (negative when B exhausts)", depends=("u", "p_a", "p_b")),
         output("dmdot_a_dp_a", 0.0, "kg/(s.Pa)", "slope of mdot_a with respect to p_a (<= 0)", depends=("u", "p_a", "p_b"), max=0.0),
         output("dmdot_b_dp_b", 0.0, "kg/(s.Pa)", "slope of mdot_b with respect to p_b (<= 0)", depends=("u", "p_a", "p_b"), max=0.0),
-        parameter("P_s", rig.P_s, "Pa", "supply pressure, absolute", min=0.0),
-        parameter("P_e", rig.P_e, "Pa", "exhaust pressure, absolute", min=0.0),
+        *rig_parameters("P_s", "P_e"),
         parameter("A_max", rig.A_max, "m2", "orifice area of each port at full opening", min=0.0),
-        parameter("T", rig.T, "K", "air temperature", min=0.0),
-        parameter("k", rig.k, "1", "ratio of specific heats of air", min=1.0),
-        parameter("R", rig.R, "J/(kg.K)", "specific gas constant of air", min=0.0),
+        *rig_parameters("T", "k", "R"),
         parameter("tau_spool", 0.0, "s", "valve_dynamics: time constant of the spool's first-order lag; 0: off", min=0.0),
         parameter("deadband", 0.0, "V", "valve_deadband: half-width of the closed band around 5 V; 0: off", min=0.0, max=4.9),
     )

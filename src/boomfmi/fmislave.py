@@ -22,6 +22,7 @@ from typing import NamedTuple, Optional, Tuple
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
 from pythonfmu.enums import Fmi2Initial, Fmi2Status
 
+from .physics import reference_rig as rig
 from .physics.validation import ParameterError
 
 
@@ -54,6 +55,40 @@ def input(name, start, unit, description, min=None, max=None, type="Real"):  # n
 
 def output(name, start, unit, description, depends=(), min=None, max=None, type="Real"):
     return Variable(name, "output", unit, description, start, min, max, type, tuple(depends))
+
+
+#: The reference rig's constants as FMU parameters, declared once for every FMU that
+#: needs them (``reference-rig.md``; SI, pressures absolute).
+RIG_PARAMETERS = {v.name: v for v in (
+    parameter("P_s", rig.P_s, "Pa", "supply pressure, absolute", min=0.0),
+    parameter("P_e", rig.P_e, "Pa", "exhaust pressure, absolute", min=0.0),
+    parameter("P_atm", rig.P_atm, "Pa", "atmospheric pressure (it acts on the rod)", min=0.0),
+    parameter("k", rig.k, "1", "ratio of specific heats of air", min=1.0),
+    parameter("R", rig.R, "J/(kg.K)", "specific gas constant of air", min=0.0),
+    parameter("T", rig.T, "K", "air temperature", min=0.0),
+    parameter("A_a", rig.A_a, "m2", "cap-side piston area", min=0.0),
+    parameter("A_b", rig.A_b, "m2", "rod-side annulus area", min=0.0),
+    parameter("L", rig.L, "m", "stroke", min=0.0),
+    parameter("V_a0", rig.V_a0, "m3", "dead volume of chamber A incl. port and hose", min=0.0),
+    parameter("V_b0", rig.V_b0, "m3", "dead volume of chamber B incl. port and hose", min=0.0),
+    parameter("K_v", rig.K_v, "N.s/m", "viscous friction coefficient", min=0.0),
+    parameter("F_s", rig.F_s, "N", "static friction force", min=0.0),
+    parameter("F_d", rig.F_d, "N", "Coulomb friction force", min=0.0),
+    parameter("F_L", rig.F_L, "N", "load force from the backhoe's weight, acting as F_L sin(phi)"),
+    parameter("M", rig.M, "kg", "moving mass reduced to the piston", min=0.0),
+    parameter("a", rig.a, "m", "boom geometry a (Eq. 10, 12)", min=0.0),
+    parameter("b", rig.b, "m", "boom geometry b (Eq. 10, 12)", min=0.0),
+    parameter("h", rig.h, "m", "boom geometry h (Eq. 10)", min=0.0),
+    parameter("l_min", rig.l_min, "m", "cylinder length at x = 0 (Eq. 11)", min=0.0),
+)}
+LOAD = ("K_v", "F_s", "F_d", "F_L", "M")
+GEOMETRY = ("a", "b", "h", "l_min", "L")
+CYLINDER = ("A_a", "A_b", "L", "V_a0", "V_b0")
+
+
+def rig_parameters(*names: str) -> Tuple[Variable, ...]:
+    """The rows of :data:`RIG_PARAMETERS` for ``names``, in that order, each once."""
+    return tuple(RIG_PARAMETERS[n] for n in dict.fromkeys(names))
 
 
 _TYPES = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
