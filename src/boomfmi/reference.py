@@ -248,11 +248,11 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
     df["alpha"] = ph.alpha_from_x(df["x"].to_numpy(), model.geometry)
     if tau_s > 0:                        # the measurement path: what the sensors report
         for col in ("p_a", "p_b", "alpha", "x"):
-            df[col] = _first_order(df[col].to_numpy(), times, tau_s)
+            df[col] = first_order_lag(df[col].to_numpy(), times, tau_s)
     return df
 
 
-def _first_order(y: np.ndarray, t: np.ndarray, tau: float) -> np.ndarray:
+def first_order_lag(y: np.ndarray, t: np.ndarray, tau: float) -> np.ndarray:
     """A first-order lag (``physics.effects.sensor_lag_step``) run along a signal."""
     out = np.empty_like(y)
     out[0] = y[0]

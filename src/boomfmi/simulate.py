@@ -49,10 +49,8 @@ def replay_parameters(recording) -> dict:
     """The teleoperation system's parameters for replaying ``recording`` through its
     hardware bridge: replay mode, the file, and the model starting where the machine
     starts (``boom_load.x0`` from the recording's first angle)."""
-    from .physics import Geometry, x_from_alpha
-    rec = read_recording(recording)
-    geom = Geometry(**{k: v for k, v in rec.rig_values().items() if k in Geometry._fields})
-    x0 = min(max(float(x_from_alpha(float(rec.data["alpha"].iloc[0]), geom)), 0.0), rig.L)
+    from .identify import initial_state
+    x0, _, _ = initial_state(read_recording(recording), rig.L)
     return {"hardware_bridge.mode": "replay", "hardware_bridge.recording": str(recording),
             "boom_load.x0": x0}
 

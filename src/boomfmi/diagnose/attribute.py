@@ -65,9 +65,9 @@ def errors(values: dict, effects: dict, rec, rtol: float = RTOL) -> dict:
     only_lag = set(effects) == {"sensor_lag"}
     sim = _baseline(values, rec, rtol) if only_lag else simulate_recording(values, rec, effects=effects, rtol=rtol)
     if only_lag:
-        from ..reference import _first_order
+        from ..reference import first_order_lag
         t = sim["time"].to_numpy()
-        sim = {c: _first_order(sim[c].to_numpy(), t, effects["sensor_lag"]["tau"]) for c in CHANNELS}
+        sim = {c: first_order_lag(sim[c].to_numpy(), t, effects["sensor_lag"]["tau"]) for c in CHANNELS}
     return nrmse(sim, rec)
 
 

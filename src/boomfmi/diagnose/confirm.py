@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..identify import nrmse
+from .. import physics as ph
+from ..identify import initial_state, nrmse
 
 #: (effect, candidate parameter) -> the FMU parameter that switches it on
 FMU_PARAMETERS = {
@@ -30,7 +31,6 @@ FMU_PARAMETERS = {
     ("end_cushioning", "length"): "cylinder.l_cushion",
     ("end_cushioning", "A_n"): "cylinder.A_cushion",
 }
-LOAD = ("K_v", "F_s", "F_d", "F_L", "M")
 #: the FMUs and the reference agree when their shrinks differ by less than this
 AGREEMENT = 0.1
 
@@ -42,12 +42,9 @@ def default_ssp() -> Path:
 def fmu_parameters(values: dict, effects: dict, rec) -> dict:
     """SSP parameters for the holdout ``rec``: the baseline load, the start where the
     recording starts, and the effects' FMU options."""
-    from ..physics import x_from_alpha
-    from ..physics import reference_rig as rig
-    params = {f"boom_load.{k}": float(values[k]) for k in LOAD if k in values}
-    params["boom_load.x0"] = float(np.clip(x_from_alpha(float(rec.data["alpha"].iloc[0])), 0.0, rig.L))
-    params["cylinder.p_a0"] = float(rec.data["p_a"].iloc[0]) + rec.P_atm
-    params["cylinder.p_b0"] = float(rec.data["p_b"].iloc[0]) + rec.P_atm
+    params = {f"boom_load.{k}": float(values[k]) for k in ph.Load._fields if k in values}
+    x0, p_a0, p_b0 = initial_state(rec, float(rec.rig_values().get("L", ph.reference_rig.L)))
+    params.update({"boom_load.x0": x0, "cylinder.p_a0": p_a0, "cylinder.p_b0": p_b0})
     if "A_max" in values:
         params["valve.A_max"] = float(values["A_max"])
     for name, p in effects.items():
@@ -61,26 +58,19 @@ def fmu_parameters(values: dict, effects: dict, rec) -> dict:
 
 def run_fmus(ssp, values: dict, effects: dict, rec) -> dict:
     """The SSP on the recording's command: x, p_a, p_b (gauge) on its samples."""
-    from ..physics.effects import sensor_lag_step
+    from ..reference import first_order_lag
     from ..simulate import run_experiment
     out = run_experiment(ssp, str(rec.path), parameters=[fmu_parameters(values, effects, rec)])
     t = rec.data["t"].to_numpy(float)
     sim = {c: np.interp(t, out["t"].to_numpy(), out[c].to_numpy()) for c in ("x", "p_a", "p_b")}
     tau = effects.get("sensor_lag", {}).get("tau", 0.0)
-    if tau > 0:
-        for c, y in sim.items():
-            lagged = np.empty_like(y)
-            lagged[0] = y[0]
-            for i in range(1, len(y)):
-                lagged[i] = sensor_lag_step(lagged[i - 1], y[i], t[i] - t[i - 1], tau)
-            sim[c] = lagged
-    return sim
+    return {c: first_order_lag(y, t, tau) for c, y in sim.items()} if tau > 0 else sim
 
 
-def confirm(values: dict, effects: dict, rec, reference_shrink: float | None, ssp=None) -> dict:
+def confirm(values: dict, effects: dict, rec, ssp=None) -> dict:
     """The holdout ``rec`` through the FMUs, baseline and (where ``effects``) with the
-    verdict's options: NRMSE per channel, shrink, and whether it agrees with the
-    reference's ``reference_shrink``."""
+    verdict's options: NRMSE per channel and shrink (set beside the reference's by
+    :func:`agreement`)."""
     ssp = Path(ssp) if ssp is not None else default_ssp()
     if not ssp.is_file():
         return {"ssp": str(ssp), "skipped": "the SSP is not built (python build_fmus.py)"}
@@ -92,6 +82,11 @@ def confirm(values: dict, effects: dict, rec, reference_shrink: float | None, ss
         shrink = 1.0 - sum(after.values()) / max(sum(before.values()), 1e-12)
         doc.update({"effects": effects, "nrmse_holdout_after": {k: round(v, 6) for k, v in after.items()},
                     "shrink": round(shrink, 4)})
-        if reference_shrink is not None:
-            doc["agrees"] = bool(abs(shrink - reference_shrink) < AGREEMENT)
     return doc
+
+
+def agreement(doc: dict, reference_shrink: float) -> dict:
+    """``doc`` (from :func:`confirm`) with the reference's shrink and whether the two
+    agree within :data:`AGREEMENT`."""
+    return dict(doc, reference_shrink=round(reference_shrink, 4),
+                agrees=bool(abs(doc["shrink"] - reference_shrink) < AGREEMENT))

@@ -20,7 +20,7 @@ from ..recording import read_recording
 from .._json import plain
 from ..identify import recorded
 from .attribute import CHANNELS, attribute
-from .confirm import AGREEMENT, confirm
+from .confirm import agreement, confirm
 from .localise import localise
 
 MIN_TRAVEL = 1e-3     #: [m] a recording whose piston moves less than this cannot be judged
@@ -60,14 +60,14 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
     # the FMUs confirm the result in another process while the report is drawn here
     from concurrent.futures import ProcessPoolExecutor
     pool = ProcessPoolExecutor(1)
-    confirming = pool.submit(confirm, values, verdict_fx, hold, None, ssp)
+    confirming = pool.submit(confirm, values, verdict_fx, hold, ssp)
     from ..identify.preprocess import prepare
     prep = prepare(hold)
     base_sim = simulate_recording(values, hold)
     abs_sim = base_sim.copy()
     abs_sim["p_a"] += hold.P_atm
     abs_sim["p_b"] += hold.P_atm
-    load = ph.Load(**{k: values[k] for k in ("K_v", "F_s", "F_d", "F_L", "M")})
+    load = ph.Load(**{k: values[k] for k in ph.Load._fields})
     loc = localise(prep, abs_sim, load) if att.gap else None
     effects = [{"name": c.name, "params": c.params,
                 "nrmse_holdout_after": {k: round(v, 6) for k, v in c.holdout.items()},
@@ -90,9 +90,8 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
         pool.shutdown()
     if after_sim is not None and "shrink" in doc["confirmation"]:
         before, after = nrmse(base_sim, hold), nrmse(after_sim, hold)
-        ref = 1.0 - sum(after.values()) / max(sum(before.values()), 1e-12)
-        doc["confirmation"]["reference_shrink"] = round(ref, 4)
-        doc["confirmation"]["agrees"] = bool(abs(doc["confirmation"]["shrink"] - ref) < AGREEMENT)
+        doc["confirmation"] = agreement(doc["confirmation"],
+                                        1.0 - sum(after.values()) / max(sum(before.values()), 1e-12))
     _write(out, doc, hold, base_sim, after_sim, loc)
     return doc
 

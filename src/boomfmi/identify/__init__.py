@@ -52,11 +52,20 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
     return result, recs, preps
 
 
+def initial_state(rec, L: float) -> tuple[float, float, float]:
+    """Where a recording starts: the piston position x0 [m] (Eq. 12 from the first
+    angle at the recording's geometry, within the stroke ``L``) and the absolute chamber
+    pressures p_a0, p_b0 [Pa]."""
+    geom = ph.Geometry(**{k: v for k, v in rec.rig_values().items() if k in ph.Geometry._fields})
+    x0 = float(np.clip(ph.x_from_alpha(float(rec.data["alpha"].iloc[0]), geom), 0.0, L))
+    return (x0, float(rec.data["p_a"].iloc[0]) + rec.P_atm, float(rec.data["p_b"].iloc[0]) + rec.P_atm)
+
+
 def model_for(values: dict, effects: dict | None = None):
     """A ``reference.Model`` with the identified values in place of the reference rig's
     (and candidate ``effects`` switched on)."""
     from ..reference import Model
-    load = ph.Load(**{k: values[k] for k in ("K_v", "F_s", "F_d", "F_L", "M") if k in values
+    load = ph.Load(**{k: values[k] for k in ph.Load._fields if k in values
                       and math.isfinite(values[k])})
     valve = ph.Valve(A_max=values["A_max"]) if "A_max" in values else ph.Valve()
     return Model(load=load, valve=valve, effects=dict(effects or {}))
@@ -74,10 +83,7 @@ def simulate_recording(values: dict, rec, effects: dict | None = None, rtol: flo
         i = max(0, int(np.searchsorted(t, s + 1e-9, side="right")) - 1)
         return {"u": float(u[i])}
     model = model_for(values, effects)
-    x0 = float(np.clip(ph.x_from_alpha(float(rec.data["alpha"].iloc[0])), 0.0, model.cylinder.L))
-    model.x0 = x0
-    model.p_a0 = float(rec.data["p_a"].iloc[0]) + rec.P_atm
-    model.p_b0 = float(rec.data["p_b"].iloc[0]) + rec.P_atm
+    model.x0, model.p_a0, model.p_b0 = initial_state(rec, model.cylinder.L)
     sim = simulate_reference(model, command, float(t[-1]), times=t - t[0], breakpoints=changes - t[0],
                              rtol=rtol)
     sim["p_a"] -= rec.P_atm
