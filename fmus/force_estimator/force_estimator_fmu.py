@@ -86,23 +86,24 @@ class ForceEstimator(BoomSlave):
         self._started = False
 
     def step(self, t, dt):
-        p_a = below_sensor_floor(self.p_a_measured, self.p_a_model - self.P_atm, self.p_floor) + self.P_atm
-        p_b = below_sensor_floor(self.p_b_measured, self.p_b_model - self.P_atm, self.p_floor) + self.P_atm
-        drive = measured_drive_force(p_a, p_b, self.x_measured, self._cyl, self._geom, self._load, self.P_atm)
         if not self._started:               # the filters start at rest at the first measurement
-            self._x_f, self._v_f, self._started = self.x_measured, 0.0, True
-            self._d_f, self._dd_f = drive, 0.0
+            self._x_f, self._v_f = self.x_measured, 0.0
         self._x_f, self._v_f, self.v_measured, a = motion_filter_step(self._x_f, self._v_f, self.x_measured,
                                                                       dt, self._omega)
         if self.method == "observer":
+            p_a = below_sensor_floor(self.p_a_measured, self.p_a_model - self.P_atm, self.p_floor) + self.P_atm
+            p_b = below_sensor_floor(self.p_b_measured, self.p_b_model - self.P_atm, self.p_floor) + self.P_atm
+            drive = measured_drive_force(p_a, p_b, self.x_measured, self._cyl, self._geom, self._load, self.P_atm)
+            if not self._started:
+                self._d_f, self._dd_f = drive, 0.0
             d_0 = self._d_f                 # the known forces through the same filter: same delay
             self._d_f, self._dd_f, _, _ = motion_filter_step(self._d_f, self._dd_f, drive, dt, self._omega)
-            force = observed_external_force(p_a, p_b, self.x_measured, self.v_measured, a, self._cyl,
-                                            self._geom, self._load, self.P_atm, self.v_rest,
-                                            drive=0.5 * (d_0 + self._d_f))
+            force = observed_external_force(0.5 * (d_0 + self._d_f), self.x_measured, self.v_measured, a,
+                                            self._cyl, self._geom, self._load, self.v_rest)
         else:
             x_m = min(max(self.x_model, 0.0), self.L)
             K = self.K_p or pneumatic_stiffness(self.p_a_model, self.p_b_model, x_m, self._cyl, self._gas)
             force = position_error_force(self.x_model, self.x_measured, self.v_model, self.v_measured, K, self.D)
+        self._started = True
         self.f_est = low_pass_step(self.f_est, force, dt, self.tau_est)
         self.f_reflect = reflected_force(self.f_est, self.f_reflect, dt, self.gain, self.f_max, self.rate_max)

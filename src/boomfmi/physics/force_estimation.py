@@ -105,24 +105,18 @@ def below_sensor_floor(p_measured, p_model, p_floor):
     return p_model if (p_measured <= p_floor and p_model < p_measured) else p_measured
 
 
-def observed_external_force(p_a: float, p_b: float, x: float, v: float, a: float,
+def observed_external_force(drive: float, x: float, v: float, a: float,
                             cyl: Cylinder = Cylinder(), geom: Geometry = Geometry(),
-                            load: Load = Load(), P_atm: float = 101_325.0,
-                            v_rest: float = 2e-3, x_stop: float = 5e-4,
-                            drive: float | None = None) -> float:
+                            load: Load = Load(), v_rest: float = 2e-3, x_stop: float = 5e-4) -> float:
     """The external force [N, positive against extension] that Eq. 8 needs to explain
-    the measured absolute pressures ``p_a``, ``p_b`` [Pa], position ``x`` [m], velocity
-    ``v`` [m/s] and acceleration ``a`` [m/s^2].
+    the known forces ``drive`` [N] (:func:`measured_drive_force`, filtered like the
+    motion), at position ``x`` [m], velocity ``v`` [m/s] and acceleration ``a`` [m/s^2].
 
     Below ``v_rest`` [m/s] the piston counts as at rest: the force friction can hold
     (``F_s cos(phi)``) is taken off the unexplained force, towards zero.  Within
     ``x_stop`` [m] of an end stop, a force towards that stop is the stop's reaction and
-    is not reported.  ``drive`` [N], where given, stands for the known forces
-    (:func:`measured_drive_force` of ``p_a``, ``p_b``, ``x``), filtered like the motion."""
-    phi = phi_from_x(min(max(x, 0.0), cyl.L), geom)
-    c = math.cos(phi)
-    if drive is None:
-        drive = piston_force(p_a, p_b, cyl, P_atm) - load.F_L * math.sin(phi)
+    is not reported."""
+    c = math.cos(phi_from_x(min(max(x, 0.0), cyl.L), geom))
     residual = drive - load.M * a
     if abs(v) > v_rest:
         f = residual - load.K_v * v - math.copysign(load.F_d * c, v)
