@@ -64,6 +64,12 @@ class Recording:
     def P_atm(self) -> float:
         return float(self.rig.get("P_atm", rig.P_atm))
 
+    def rig_tuple(self, cls):
+        """A physics parameter set (``physics.Geometry``, ``Cylinder``, ``Gas``...) of
+        the reference rig's values with this recording's sidecar overrides."""
+        over = self.rig_values()
+        return cls(**{k: over[k] for k in cls._fields if k in over})
+
     def rig_values(self) -> dict:
         """The sidecar's overrides by parameter name (``supply_pressure_gauge`` becomes
         the absolute ``P_s``)."""

@@ -50,7 +50,7 @@ def replay_parameters(recording) -> dict:
     hardware bridge: replay mode, the file, and the model starting where the machine
     starts (``boom_load.x0`` from the recording's first angle)."""
     from .identify import initial_state
-    x0, _, _ = initial_state(read_recording(recording), rig.L)
+    x0, _, _ = initial_state(read_recording(recording))
     return {"hardware_bridge.mode": "replay", "hardware_bridge.recording": str(recording),
             "boom_load.x0": x0}
 

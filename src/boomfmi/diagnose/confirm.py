@@ -43,7 +43,7 @@ def fmu_parameters(values: dict, effects: dict, rec) -> dict:
     """SSP parameters for the holdout ``rec``: the baseline load, the start where the
     recording starts, and the effects' FMU options."""
     params = {f"boom_load.{k}": float(values[k]) for k in ph.Load._fields if k in values}
-    x0, p_a0, p_b0 = initial_state(rec, float(rec.rig_values().get("L", ph.reference_rig.L)))
+    x0, p_a0, p_b0 = initial_state(rec)
     params.update({"boom_load.x0": x0, "cylinder.p_a0": p_a0, "cylinder.p_b0": p_b0})
     if "A_max" in values:
         params["valve.A_max"] = float(values["A_max"])

@@ -34,12 +34,8 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
     if len(rigs) > 1:
         raise ValueError("the recordings come from different rigs (their sidecars' 'rig' values differ): "
                          + ", ".join(str(r.path) for r in recs))
-    over = recs[0].rig_values()
     P_atm = recs[0].P_atm
-    geom = ph.Geometry(**{k: over[k] for k in ph.Geometry._fields if k in over})
-    cyl = ph.Cylinder(**{k: over[k] for k in ph.Cylinder._fields if k in over})
-    valve = ph.Valve(**{k: over[k] for k in ("P_s", "P_e", "A_max") if k in over})
-    gas = ph.Gas(**{k: over[k] for k in ph.Gas._fields if k in over})
+    geom, cyl, valve, gas = (recs[0].rig_tuple(cls) for cls in (ph.Geometry, ph.Cylinder, ph.Valve, ph.Gas))
     preps = [prepare(r, cutoff, geometry=geom, P_atm=P_atm) for r in recs]
     if method == "fit":
         result = identify(preps, cyl, geom, P_atm=P_atm, with_A_max=with_A_max, valve=valve, gas=gas)
@@ -52,12 +48,12 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
     return result, recs, preps
 
 
-def initial_state(rec, L: float) -> tuple[float, float, float]:
+def initial_state(rec) -> tuple[float, float, float]:
     """Where a recording starts: the piston position x0 [m] (Eq. 12 from the first
-    angle at the recording's geometry, within the stroke ``L``) and the absolute chamber
-    pressures p_a0, p_b0 [Pa]."""
-    geom = ph.Geometry(**{k: v for k, v in rec.rig_values().items() if k in ph.Geometry._fields})
-    x0 = float(np.clip(ph.x_from_alpha(float(rec.data["alpha"].iloc[0]), geom), 0.0, L))
+    angle, within the stroke, at the recording's rig) and the absolute chamber pressures
+    p_a0, p_b0 [Pa]."""
+    alpha0 = float(rec.data["alpha"].iloc[0])
+    x0 = float(np.clip(ph.x_from_alpha(alpha0, rec.rig_tuple(ph.Geometry)), 0.0, rec.rig_tuple(ph.Cylinder).L))
     return (x0, float(rec.data["p_a"].iloc[0]) + rec.P_atm, float(rec.data["p_b"].iloc[0]) + rec.P_atm)
 
 
@@ -83,7 +79,7 @@ def simulate_recording(values: dict, rec, effects: dict | None = None, rtol: flo
         i = max(0, int(np.searchsorted(t, s + 1e-9, side="right")) - 1)
         return {"u": float(u[i])}
     model = model_for(values, effects)
-    model.x0, model.p_a0, model.p_b0 = initial_state(rec, model.cylinder.L)
+    model.x0, model.p_a0, model.p_b0 = initial_state(rec)
     sim = simulate_reference(model, command, float(t[-1]), times=t - t[0], breakpoints=changes - t[0],
                              rtol=rtol)
     sim["p_a"] -= rec.P_atm

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..physics import Geometry, linkage_points, x_from_alpha
+from ..physics import Cylinder, Geometry, linkage_points, x_from_alpha
 from ..physics import reference_rig as rig
 from ..recording import read_recording
 
@@ -115,9 +115,8 @@ def load_run(path) -> Run:
     line and column of anything malformed."""
     rec = read_recording(path)
     d: pd.DataFrame = rec.data
-    over = rec.rig_values()
-    geom = Geometry(**{k: float(v) for k, v in over.items() if k in Geometry._fields})
-    L = float(over.get("L", rig.L))
+    geom = rec.rig_tuple(Geometry)
+    L = rec.rig_tuple(Cylinder).L
 
     def posture(suffix: str) -> dict:
         cols = {k: d[k + suffix].to_numpy(float) for k in ("alpha", "p_a", "p_b")}
@@ -135,7 +134,7 @@ def load_run(path) -> Run:
 
 def live_frame(sample: dict, geom: Geometry) -> dict:
     """A frame from one live sample: the flat mapping a co-simulation sends
-    (``simulate.LiveSender``): ``t``, the model's ``alpha, x, p_a, p_b``, the machine's
+    (``view.live.LiveSender``): ``t``, the model's ``alpha, x, p_a, p_b``, the machine's
     ``alpha_measured, ...``, and whichever forces it has.  A sample without the
     machine's columns shows the model as the machine (a model-only run)."""
     def posture(suffix: str) -> dict | None:
