@@ -38,6 +38,7 @@ from aiohttp import WSMsgType, web
 
 from ..link.client import parse_address
 from ..physics import Geometry
+from ..physics import reference_rig as rig
 from .frames import Run, live_frame, scene
 
 WEB = Path(__file__).resolve().parent / "web"
@@ -118,11 +119,11 @@ class Player:
         """Apply a page's command; True when the plots need the history again."""
         cmd = msg.get("cmd")
         if cmd == "play":
-            if self.t >= self.run.t[-1]:
+            again = self.t >= self.run.t[-1]          # at the end: from the start
+            if again:
                 self.t = float(self.run.t[0])
-                self.playing = True
-                return True
             self.playing = True
+            return again
         elif cmd == "pause":
             self.playing = False
         elif cmd == "seek":
@@ -225,7 +226,7 @@ class LiveHub(asyncio.DatagramProtocol):
 
     def hello(self) -> str:
         last = self.history[-1] if self.history else None
-        return _hello("live", self.source, last["t"] if last else 0.0, None, self.geom, 0.06,
+        return _hello("live", self.source, last["t"] if last else 0.0, None, self.geom, rig.L,
                       bool(last and last["model"] is not None), bool(last and last["f_ext"] is not None))
 
 
@@ -271,16 +272,14 @@ def make_app(run: Run | None = None, hub: LiveHub | None = None) -> web.Applicat
     return app
 
 
-async def _serve(app: web.Application, host: str, port: int, hub: LiveHub | None, live: str | None,
-                 ready) -> None:
+async def _serve(app: web.Application, host: str, port: int, hub: LiveHub | None, udp, ready) -> None:
     loop = asyncio.get_running_loop()
     transport = None
     if hub is not None:
-        udp_host, udp_port = parse_address(live)
         try:
-            transport, _ = await loop.create_datagram_endpoint(lambda: hub, local_addr=(udp_host, udp_port))
+            transport, _ = await loop.create_datagram_endpoint(lambda: hub, local_addr=udp)
         except OSError as e:
-            raise ViewError(f"cannot listen for the live feed on {live}: {e}") from None
+            raise ViewError(f"cannot listen for the live feed on {hub.source}: {e}") from None
     runner = web.AppRunner(app, access_log=None)
     await runner.setup()
     site = web.TCPSite(runner, host, port)
@@ -310,8 +309,7 @@ def serve(replay=None, live: str | None = None, host: str = "127.0.0.1", port: i
     if (replay is None) == (live is None):
         raise ViewError("give a run to replay or a live address, not both or neither")
     run = load_run(replay) if replay is not None else None
+    udp = parse_address(live) if live is not None else None
     hub = LiveHub(live) if live is not None else None
-    if live is not None:
-        parse_address(live)
     app = make_app(run, hub)
-    asyncio.run(_serve(app, host, port, hub, live, ready))
+    asyncio.run(_serve(app, host, port, hub, udp, ready))
