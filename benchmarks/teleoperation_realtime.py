@@ -36,15 +36,12 @@ def machine_floor(duration: float, dt: float = 1e-3) -> str:
     0.3 ms before each slot, then spin), doing nothing, under the same scheduling.
     Counts the slots it woke in more than a step late: stalls no workload can avoid."""
     import time
+    from boomfmi.link.client import wait_until
     t0 = time.perf_counter()
     late, worst, n = 0, 0.0, int(duration / dt)
     for k in range(1, n + 1):
         deadline = t0 + k * dt
-        pause = deadline - time.perf_counter() - 3e-4
-        if pause > 0:
-            time.sleep(pause)
-        while time.perf_counter() < deadline:
-            pass
+        wait_until(deadline)
         lag = time.perf_counter() - deadline
         worst = max(worst, lag)
         if lag > dt:

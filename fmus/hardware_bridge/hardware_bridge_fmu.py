@@ -31,7 +31,7 @@ import bisect
 import time
 
 from boomfmi_hardware_bridge_lib.fmislave import GEOMETRY, BoomSlave, input, output, parameter, rig_parameters
-from boomfmi_hardware_bridge_lib.link.client import RigClient, parse_address
+from boomfmi_hardware_bridge_lib.link.client import RigClient, parse_address, wait_until
 from boomfmi_hardware_bridge_lib.link.protocol import LinkError, load_key
 from boomfmi_hardware_bridge_lib.physics import Geometry, ParameterError, check_geometry, x_from_alpha
 from boomfmi_hardware_bridge_lib.physics import reference_rig as rig
@@ -39,16 +39,6 @@ from boomfmi_hardware_bridge_lib.physics.effects import sensor_lag_step
 from boomfmi_hardware_bridge_lib.recording import RecordingError, parse_recording
 
 MEASURED = ("p_a", "p_b", "alpha", "f_ext")
-
-
-def _wait_until(deadline: float) -> None:
-    """Sleep to just short of ``deadline`` (perf_counter seconds), then spin: a plain
-    sleep overshoots by up to a few hundred microseconds."""
-    pause = deadline - time.perf_counter() - 3e-4
-    if pause > 0:
-        time.sleep(pause)
-    while time.perf_counter() < deadline:
-        pass
 
 
 class HardwareBridge(BoomSlave):
@@ -200,7 +190,7 @@ class HardwareBridge(BoomSlave):
             # latest sample back (a DAQ tick: write the output, read the inputs), then
             # hold until the slot ends so the step returns on the wall clock's beat
             sample = self._exchange(self.u, t, dt)
-            _wait_until(self._wall0 + t + dt)
+            wait_until(self._wall0 + t + dt)
         else:
             sample = self._exchange(self.u, t, dt)              # lockstep: one command, one sample
             if sample is not None and abs(sample.t - (self._rig_t0 + t + dt)) > 0.5 * dt:

@@ -110,9 +110,8 @@ def _view(args) -> int:
 
 def _rig_serve(args) -> int:
     from .link.protocol import load_key
-    from .rig.server import realtime_priority
     from .rig import VirtualRig, load_config
-    from .rig.server import serve
+    from .rig.server import realtime_priority, serve
     key = load_key(args.key_file)
     plant = VirtualRig(load_config(args.config))
     if args.priority:

@@ -25,6 +25,16 @@ def parse_address(url: str) -> tuple[str, int]:
     return host, int(port)
 
 
+def wait_until(deadline: float) -> None:
+    """Sleep to just short of ``deadline`` (``time.perf_counter`` seconds), then spin:
+    a plain sleep overshoots by up to a few hundred microseconds."""
+    pause = deadline - time.perf_counter() - 3e-4
+    if pause > 0:
+        time.sleep(pause)
+    while time.perf_counter() < deadline:
+        pass
+
+
 class RigClient:
     def __init__(self, host: str, port: int, key: bytes, timeout: float = 0.02):
         if not timeout > 0:
