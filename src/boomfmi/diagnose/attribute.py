@@ -162,7 +162,8 @@ def _fit_and_score(args):
 
 
 def _cost(job) -> int:
-    """A fit's rough cost, for scheduling: its parameters times its laws."""
+    """A fit's rough cost, for scheduling: steep in its parameters (a grid, then a
+    simplex), times its laws."""
     name = job[0]
     return len(CANDIDATES[name]) ** 3 * len(FORMS.get(name, [None]))
 
@@ -187,7 +188,8 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     floors = [noise_floor(r) for r in hold_recs]
     noise = {c: float(np.mean([f[c] for f in floors])) for c in CHANNELS}
     total_before = sum(before.values())
-    gap = total_before > NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR
+    threshold = NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR
+    gap = total_before > threshold
     workers = workers or os.cpu_count() or 1
     fitted = _map(_fit_and_score, [(n, values, fit_recs, hold_recs, None) for n in names], workers)
     cands = [Candidate(n, fx[n], cost, after, 1.0 - sum(after.values()) / max(total_before, 1e-12))
@@ -203,8 +205,7 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
         best = cands[0]
         if best.shrink >= MIN_SHRINK:
             verdict = [best.name]
-            pair = _second_effect(best, cands[1:], values, fit_recs, hold_recs, total_before,
-                                  NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR, workers)
+            pair = _second_effect(best, cands[1:], values, fit_recs, hold_recs, total_before, threshold, workers)
             if pair is not None:
                 pair.score = round(best_strength, 4)
                 verdict = pair.name.split("+")

@@ -222,27 +222,6 @@ def _windows(preps, L, before=0.2, after=0.1, base=None, cyl=None, P_atm=None):
 _SCAN: dict = {}
 
 
-def _scan_cost(value: float) -> float:
-    return _SCAN["cost"](value)
-
-
-def scan(cost, grid) -> list[float]:
-    """``cost`` at every point of ``grid``, on every core where the platform forks
-    (the workers inherit ``cost`` and its data; only numbers cross), else in turn."""
-    import multiprocessing
-    import os
-    workers = min(os.cpu_count() or 1, len(grid))
-    if workers < 2 or "fork" not in multiprocessing.get_all_start_methods():
-        return [cost(g) for g in grid]
-    from concurrent.futures import ProcessPoolExecutor
-    _SCAN["cost"] = cost
-    try:
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
-            return list(pool.map(_scan_cost, grid, chunksize=max(1, len(grid) // (2 * workers))))
-    finally:
-        _SCAN.clear()
-
-
 def _run_part(args):
     k, theta = args
     return _SCAN["part"](k, theta)
@@ -274,6 +253,22 @@ class _Parts:
         if self.pool is not None:
             self.pool.shutdown()
             _SCAN.pop("part", None)
+
+
+def _workers(n_items: int) -> int:
+    import os
+    return max(1, min(os.cpu_count() or 1, n_items))
+
+
+def scan(cost, grid) -> list[float]:
+    """``cost`` at every point of ``grid``, the points dealt over the cores."""
+    n, grid = _workers(len(grid)), list(grid)
+    with _Parts(lambda k, g: [cost(v) for v in g[k::n]], n) as run:
+        parts = run(grid)
+    out = [0.0] * len(grid)
+    for k, part in enumerate(parts):
+        out[k::n] = part
+    return out
 
 
 def _balanced(sizes: list, n: int) -> list[list[int]]:
@@ -339,8 +334,7 @@ def refine(preps, start: dict, cyl, geom, P_atm, L):
             segments.append((p, i0, i1, x0, np.abs(p.x_raw[i0:i1] - reading) > DEPARTED))
     names = ("K_v", "F_d", "F_L", "M")
     x0 = np.array([start[k] for k in names])
-    import os
-    n = max(1, min(os.cpu_count() or 1, len(segments)))
+    n = _workers(len(segments))
     dealt = _balanced([i1 - i0 for _, i0, i1, _, _ in segments], n)
     parts = [[segments[i] for i in idx] for idx in dealt]
     order = np.argsort(np.concatenate(dealt))     # back to the segments' own order
