@@ -40,12 +40,19 @@ def main(argv=None) -> int:
                 from boomfmi.fmubuild.references import INPUTS, write_references
                 if name in INPUTS:      # the bridge's behaviour depends on its rig or recording
                     print(f"wrote {write_references(HERE / 'fmus' / name, path)}")
-        if set(args.names) == set(FMU_NAMES):
-            from boomfmi.fmubuild.ssp import pack_ssp, write_reference_parameters
-            if args.write_references:
-                print(f"wrote {write_reference_parameters([HERE / 'ssp' / ssd for ssd in SSPS.values()], args.out / 'fmus', HERE / 'ssp' / 'reference_rig.ssv')}")
-            for name, ssd in SSPS.items():
-                print(f"packed {pack_ssp(HERE / 'ssp' / ssd, args.out / 'fmus', args.out / f'{name}.ssp')}")
+        from boomfmi.fmubuild.ssp import fmus_of, pack_ssp, write_reference_parameters
+        if set(args.names) == set(FMU_NAMES) and args.write_references:
+            print(f"wrote {write_reference_parameters([HERE / 'ssp' / ssd for ssd in SSPS.values()], args.out / 'fmus', HERE / 'ssp' / 'reference_rig.ssv')}")
+        for name, ssd in SSPS.items():
+            # an SSP carries copies of its FMUs: re-pack every one that holds a rebuilt FMU
+            fmus = fmus_of(HERE / "ssp" / ssd)
+            if not fmus & set(args.names):
+                continue
+            missing = sorted(f for f in fmus if not (args.out / "fmus" / f"{f}.fmu").is_file())
+            if missing:
+                print(f"not packed {args.out / f'{name}.ssp'}: {', '.join(missing)} not built yet")
+                continue
+            print(f"packed {pack_ssp(HERE / 'ssp' / ssd, args.out / 'fmus', args.out / f'{name}.ssp')}")
     except BuildError as e:
         print(f"build_fmus.py: {e}", file=sys.stderr)
         return 1

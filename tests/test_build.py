@@ -141,3 +141,25 @@ def test_fmus_use_their_own_physics_even_with_boomfmi_installed(fmu):
         module = sys.modules["boomfmi_valve_lib.physics.orifice"]
         assert "boomfmi_valve_lib" in module.__file__
         assert not Path(module.__file__).is_relative_to(ROOT / "src")
+
+
+def test_rebuilding_one_fmu_repacks_the_ssps_that_carry_it(clean_build, tmp_path):
+    """An SSP holds copies of its FMUs: rebuilding the bridge alone must re-pack
+    teleoperation.ssp (which carries it) and leave excavator_boom.ssp (which does not)
+    alone; into an empty folder, the SSP is not packed and the output says why."""
+    import zipfile
+    tree, build = clean_build.parents[1], clean_build.parent
+    boom_before = (build / "excavator_boom.ssp").stat().st_mtime_ns
+    out = subprocess.run([sys.executable, "build_fmus.py", "hardware_bridge", "--out", str(build)],
+                         cwd=tree, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert f"packed {build / 'teleoperation.ssp'}" in out.stdout
+    with zipfile.ZipFile(build / "teleoperation.ssp") as z:
+        assert z.read("resources/hardware_bridge.fmu") == (clean_build / "hardware_bridge.fmu").read_bytes()
+    assert (build / "excavator_boom.ssp").stat().st_mtime_ns == boom_before
+
+    alone = subprocess.run([sys.executable, "build_fmus.py", "hardware_bridge", "--out", str(tmp_path)],
+                           cwd=tree, capture_output=True, text=True)
+    assert alone.returncode == 0, alone.stderr
+    assert not (tmp_path / "teleoperation.ssp").exists()
+    assert "not packed" in alone.stdout and "boom_load, cylinder, force_estimator, valve not built yet" in alone.stdout

@@ -57,6 +57,13 @@ def component_parameter_set(source_dir: Path, file_name: str, component: str) ->
         return out.read_bytes()
 
 
+def fmus_of(ssd: Path) -> set[str]:
+    """The names of the FMUs that ``ssd``'s components take from ``resources/``
+    (``resources/valve.fmu`` -> ``valve``)."""
+    return {source.removeprefix("resources/").removesuffix(".fmu")
+            for source, _ in referenced_sources(Path(ssd)) if source.endswith(".fmu")}
+
+
 def pack_ssp(ssd: Path, fmu_dir: Path, out: Path) -> Path:
     """Zip ``ssd`` as SystemStructure.ssd with the FMUs (from ``fmu_dir``) and parameter
     sets (beside ``ssd``) that it references under ``resources/``."""
