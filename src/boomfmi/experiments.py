@@ -79,7 +79,10 @@ def dig() -> Callable[[float], dict]:
     the ground and hold, raise it a little, lower it harder and press, hold, raise it,
     lower it again and raise it.  The bucket meets the ground of a contact scenario
     (the virtual rig's ``contact``: ``examples/rig/contact_soft.json`` at x = 45 mm,
-    ``contact_hard.json`` at 30 mm) on the way down."""
+    ``contact_hard.json`` at 30 mm) on the way down.  ``contact_ramp.json``'s digging
+    load, against extension, rises at 40 N/s from 1 s to 300 N at 8.5 s: across three of
+    the cycle's motions (it stands at 80 to 130 N, 220 to 250 N and 260 to 290 N while
+    the boom moves), after a first lowering with no load."""
     return held([(0.5, 5.0), (1.5, 6.3), (1.0, 5.0), (0.25, 3.0), (0.75, 5.0), (1.5, 6.8),
                  (1.0, 5.0), (0.3, 3.0), (0.7, 5.0), (1.5, 6.3), (1.0, 3.5)])
 
