@@ -26,7 +26,7 @@ from boomfmi_force_estimator_lib.fmislave import (CYLINDER, GEOMETRY, LOAD,
                                                   BoomSlave, input, output, parameter, rig_parameters)
 from boomfmi_force_estimator_lib.physics import (Cylinder, Gas, Geometry, Load, ParameterError, below_sensor_floor,
                                                  check_cylinder, check_gas, check_geometry, check_load,
-                                                 measured_drive_force, motion_filter_step, low_pass_step,
+                                                 measured_drive_force, motion_filter_step, first_order_step,
                                                  observed_external_force, pneumatic_stiffness,
                                                  position_error_force, reflected_force)
 from boomfmi_force_estimator_lib.physics import reference_rig as rig
@@ -105,5 +105,5 @@ class ForceEstimator(BoomSlave):
             K = self.K_p or pneumatic_stiffness(self.p_a_model, self.p_b_model, x_m, self._cyl, self._gas)
             force = position_error_force(self.x_model, self.x_measured, self.v_model, self.v_measured, K, self.D)
         self._started = True
-        self.f_est = low_pass_step(self.f_est, force, dt, self.tau_est)
+        self.f_est = first_order_step(self.f_est, force, dt, self.tau_est)
         self.f_reflect = reflected_force(self.f_est, self.f_reflect, dt, self.gain, self.f_max, self.rate_max)

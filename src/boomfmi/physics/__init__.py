@@ -7,11 +7,12 @@ name of that FMU's own.
 """
 from . import effects, reference_rig
 from .chamber import chamber_inflows, chamber_pressure_step, chamber_volumes, pressure_rates
-from .force_estimation import (below_sensor_floor, low_pass_step, measured_drive_force, motion_filter_step,
+from .force_estimation import (below_sensor_floor, measured_drive_force, motion_filter_step,
                                observed_external_force, pneumatic_stiffness, position_error_force,
                                reflected_force)
-from .geometry import (alpha_from_x, check_geometry, cylinder_length, lever_arm, linkage_points,
+from .geometry import (alpha_from_x, check_geometry, cylinder_length, linkage_points,
                        phi_from_x, x_from_alpha)
+from .lag import first_order_step
 from .load import (acceleration, advance_load, drive_force, friction_force, piston_force,
                    slide_or_stick, sliding_acceleration)
 from .orifice import (critical_pressure_ratio, mass_flow, mass_flow_slope, signed_mass_flow,
@@ -23,9 +24,9 @@ from .valve import chamber_flow_slopes, chamber_flows, orifice_area
 
 __all__ = [
     "effects", "reference_rig", "chamber_pressure_step", "chamber_volumes", "pressure_rates",
-    "pneumatic_stiffness", "position_error_force", "reflected_force", "low_pass_step",
+    "pneumatic_stiffness", "position_error_force", "reflected_force", "first_order_step",
     "motion_filter_step", "observed_external_force", "measured_drive_force", "below_sensor_floor", "alpha_from_x",
-    "check_geometry", "cylinder_length", "phi_from_x", "x_from_alpha", "linkage_points", "lever_arm",
+    "check_geometry", "cylinder_length", "phi_from_x", "x_from_alpha", "linkage_points",
     "acceleration",
     "advance_load", "drive_force", "friction_force", "piston_force", "slide_or_stick",
     "critical_pressure_ratio", "mass_flow", "signed_mass_flow", "Cylinder", "Gas",

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 
+from .lag import first_order_step
 from .orifice import signed_mass_flow, signed_mass_flow_slope
 from .params import Gas, Load
 
@@ -41,9 +42,7 @@ from .params import Gas, Load
 def spool_lag_step(y: float, u: float, dt: float, tau: float) -> float:
     """The spool's position [V] after ``dt`` [s] of command ``u`` [V], first-order with
     time constant ``tau`` [s] (exact for a held command); ``tau <= 0`` follows u."""
-    if tau <= 0.0:
-        return u
-    return u + (y - u) * math.exp(-dt / tau)
+    return first_order_step(y, u, dt, tau)
 
 
 def deadband_command(u: float, width: float, u_centre: float = 5.0, u_span: float = 5.0) -> float:
@@ -165,6 +164,4 @@ def cushion_outflow_slope(mdot: float, slope: float, p: float, distance: float, 
 def sensor_lag_step(measured: float, true: float, dt: float, tau: float) -> float:
     """A sensor channel after ``dt`` [s]: first-order towards the true value with time
     constant ``tau`` [s]; ``tau <= 0`` reads the true value."""
-    if tau <= 0.0:
-        return true
-    return true + (measured - true) * math.exp(-dt / tau)
+    return first_order_step(measured, true, dt, tau)

@@ -20,7 +20,7 @@ sensors give: the chamber pressures and the measured motion::
 with v and a from a critically damped second-order filter of the measured position
 (:func:`motion_filter_step`), the known forces (:func:`measured_drive_force`) through
 the same filter so that both sides carry the same delay, and the result low-passed
-(:func:`low_pass_step`).  The
+(``lag.first_order_step``).  The
 friction F_c is Eq. 9's: ``F_d cos(phi)`` against the motion while sliding.  At rest
 Eq. 9 lets friction hold any force up to ``F_s cos(phi)``, which no sensor can tell
 apart from an external force; the observer then reports only what friction cannot
@@ -73,14 +73,6 @@ def motion_filter_step(x_f: float, v_f: float, x_measured: float, dt: float, ome
     v = (v_f - omega * c * dt) * decay
     x_new = x_measured + e
     return x_new, v, (x_new - x_f) / dt, (v - v_f) / dt
-
-
-def low_pass_step(y: float, target: float, dt: float, tau: float) -> float:
-    """A first-order low-pass with time constant ``tau`` [s] after ``dt`` [s] of a held
-    ``target`` (exact); ``tau <= 0`` passes the target."""
-    if tau <= 0.0:
-        return target
-    return target + (y - target) * math.exp(-dt / tau)
 
 
 def measured_drive_force(p_a: float, p_b: float, x: float, cyl: Cylinder = Cylinder(),

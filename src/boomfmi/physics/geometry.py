@@ -86,11 +86,3 @@ def linkage_points(alpha, geom: Geometry = Geometry()):
     R = (b * xp.cos(alpha - beta), b * xp.sin(alpha - beta))
     return C, R
 
-
-def lever_arm(alpha, geom: Geometry = Geometry()):
-    """The cylinder axis's distance from the boom pivot O [m]: the moment arm of the
-    piston force about O, d = a b sin(alpha) / l (twice the triangle OCR's area over
-    its side l)."""
-    a, b, _, _ = geom
-    l = xp.sqrt(a * a + b * b - 2.0 * a * b * xp.cos(alpha))
-    return a * b * xp.sin(alpha) / l

@@ -49,7 +49,7 @@ def scene(geom: Geometry = Geometry(), L: float = rig.L) -> dict:
             "bore": rig.bore, "rod": rig.rod}
 
 
-def _tip(R, b: float):
+def _tip(R):
     """The bucket's tip T on the ray O->R, at TIP_OVER_B * b from O."""
     return TIP_OVER_B * R[0], TIP_OVER_B * R[1]
 
@@ -107,7 +107,7 @@ def points(alpha: float | None, geom: Geometry) -> dict:
     if alpha is None:
         return {"R": None, "T": None}
     _, R = linkage_points(alpha, geom)
-    return {"R": [float(R[0]), float(R[1])], "T": list(map(float, _tip(R, geom.b)))}
+    return {"R": [float(R[0]), float(R[1])], "T": list(map(float, _tip(R)))}
 
 
 def load_run(path) -> Run:
