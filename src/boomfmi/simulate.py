@@ -88,6 +88,13 @@ def live_columns(cosim, bridges: list[str], P_atm: float) -> dict[str, tuple[str
     return cols
 
 
+def bound_value(cosim, name: str) -> float:
+    """The value the system binds to any component's parameter ``name`` (the first
+    binding found), else the reference rig's."""
+    return next((float(p.value) for n, p in cosim.structure.parameters.items()
+                 if n.rpartition(".")[2] == name), getattr(rig, name))
+
+
 def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
                    stop_time: float | None = None, algorithm: str = "gauss-seidel",
                    parameters=None, progress: bool = False, view: str | None = None) -> pd.DataFrame:
@@ -109,13 +116,11 @@ def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
             raise ValueError(f"the system has no free input named 'u' to drive; its inputs: {cosim.inputs}")
         bridges = [n for n, i in cosim.instances.items() if i.model_description.modelName == "hardware_bridge"]
         inputs, duration = experiment_inputs(experiment, u_names)
-        P_atm = next((float(p.value) for n, p in cosim.structure.parameters.items()
-                      if n.endswith(".P_atm")), rig.P_atm)
+        P_atm = bound_value(cosim, "P_atm")
         sender = None
         if view:
             from .view.live import LiveSender
-            geom = [next((float(p.value) for n, p in cosim.structure.parameters.items() if n.endswith("." + g)),
-                         getattr(rig, g)) for g in ("a", "b", "h", "l_min")]
+            geom = [bound_value(cosim, g) for g in ("a", "b", "h", "l_min")]
             sender = LiveSender(view, live_columns(cosim, bridges, P_atm), geom)
         try:
             result = cosim.simulate(stop_time if stop_time is not None else duration, inputs,

@@ -57,6 +57,12 @@ RTOL = 1e-5            #: the reference solver's tolerance when scoring
 FIT_RTOL = 1e-4        #: and while fitting (each fit runs the model a dozen times or more)
 
 
+def shrink(before: dict, after: dict) -> float:
+    """``1 - (error after) / (error before)``, the errors (NRMSE per channel) summed over
+    the channels: the share of the gap an effect removes."""
+    return 1.0 - sum(after.values()) / max(sum(before.values()), 1e-12)
+
+
 def errors(values: dict, effects: dict, rec, rtol: float = RTOL) -> dict:
     """NRMSE per channel of the model (``values`` and ``effects``) on one recording.
 
@@ -187,12 +193,11 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     before = mean_errors(values, {}, hold_recs)
     floors = [noise_floor(r) for r in hold_recs]
     noise = {c: float(np.mean([f[c] for f in floors])) for c in CHANNELS}
-    total_before = sum(before.values())
     threshold = NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR
-    gap = total_before > threshold
+    gap = sum(before.values()) > threshold
     workers = workers or os.cpu_count() or 1
     fitted = _map(_fit_and_score, [(n, values, fit_recs, hold_recs, None) for n in names], workers)
-    cands = [Candidate(n, fx[n], cost, after, 1.0 - sum(after.values()) / max(total_before, 1e-12))
+    cands = [Candidate(n, fx[n], cost, after, shrink(before, after))
              for n, fx, cost, after in fitted]
     cands.sort(key=lambda c: -c.shrink)
     weights = [max(c.shrink, 0.0) ** 2 for c in cands]
@@ -205,7 +210,7 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
         best = cands[0]
         if best.shrink >= MIN_SHRINK:
             verdict = [best.name]
-            pair = _second_effect(best, cands[1:], values, fit_recs, hold_recs, total_before, threshold, workers)
+            pair = _second_effect(best, cands[1:], values, fit_recs, hold_recs, before, threshold, workers)
             if pair is not None:
                 pair.score = round(best_strength, 4)
                 verdict = pair.name.split("+")
@@ -215,7 +220,7 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     return Attribution(before, noise, gap, cands, verdict)
 
 
-def _second_effect(best, others, values, fit_recs, hold_recs, total_before, threshold, workers):
+def _second_effect(best, others, values, fit_recs, hold_recs, before, threshold, workers):
     """A second effect beside ``best``, where the gap left by ``best`` alone is still
     beyond the noise: each of the next candidates that helped on its own is fitted with
     ``best`` held on; the pair is kept when the second removes at least
@@ -226,9 +231,9 @@ def _second_effect(best, others, values, fit_recs, hold_recs, total_before, thre
     seconds = [c.name for c in others if c.shrink > 0.0][:PAIR_TRIES]
     fixed = {best.name: best.params}
     fitted = _map(_fit_and_score, [(n, values, fit_recs, hold_recs, fixed) for n in seconds], workers)
-    pairs = [Candidate(f"{best.name}+{n}", fx, cost, after, 1.0 - sum(after.values()) / max(total_before, 1e-12))
+    pairs = [Candidate(f"{best.name}+{n}", fx, cost, after, shrink(before, after))
              for n, fx, cost, after in fitted]
     if not pairs:
         return None
     top = max(pairs, key=lambda c: c.shrink)
-    return top if 1.0 - sum(top.holdout.values()) / left >= MIN_SHRINK_SECOND else None
+    return top if shrink(best.holdout, top.holdout) >= MIN_SHRINK_SECOND else None

@@ -19,6 +19,7 @@ import numpy as np
 
 from .. import physics as ph
 from ..identify import initial_state, nrmse
+from .attribute import shrink
 
 #: (effect, candidate parameter) -> the FMU parameter that switches it on
 FMU_PARAMETERS = {
@@ -79,9 +80,8 @@ def confirm(values: dict, effects: dict, rec, ssp=None) -> dict:
            "nrmse_holdout_baseline": {k: round(v, 6) for k, v in before.items()}}
     if effects:
         after = nrmse(run_fmus(ssp, values, effects, rec), rec)
-        shrink = 1.0 - sum(after.values()) / max(sum(before.values()), 1e-12)
         doc.update({"effects": effects, "nrmse_holdout_after": {k: round(v, 6) for k, v in after.items()},
-                    "shrink": round(shrink, 4)})
+                    "shrink": round(shrink(before, after), 4)})
     return doc
 
 

@@ -15,11 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from .. import physics as ph
-from ..identify import identify_recordings, nrmse, simulate_recording
-from ..recording import read_recording
 from .._json import plain
-from ..identify import recorded
-from .attribute import CHANNELS, attribute
+from ..identify import identify_recordings, nrmse, recorded, simulate_recording
+from ..recording import read_recording
+from .attribute import CHANNELS, attribute, shrink
 from .confirm import agreement, confirm
 from .localise import localise
 
@@ -89,9 +88,7 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
     finally:
         pool.shutdown()
     if after_sim is not None and "shrink" in doc["confirmation"]:
-        before, after = nrmse(base_sim, hold), nrmse(after_sim, hold)
-        doc["confirmation"] = agreement(doc["confirmation"],
-                                        1.0 - sum(after.values()) / max(sum(before.values()), 1e-12))
+        doc["confirmation"] = agreement(doc["confirmation"], shrink(nrmse(base_sim, hold), nrmse(after_sim, hold)))
     _write(out, doc, hold, base_sim, after_sim, loc)
     return doc
 
