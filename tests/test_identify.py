@@ -114,3 +114,20 @@ def test_identify_names_a_malformed_recording(tmp_path):
     bad.write_text("t,u,p_a,p_b,alpha\n0,5,0,0,0.6\n0.001,5,zero,0,0.6\n")
     with pytest.raises(RecordingError, match=r"bad.csv, line 3, column 'p_a'"):
         identify_recordings([bad])
+
+
+def test_the_model_runs_at_the_recordings_rig(tmp_path):
+    """A sidecar's rig values (geometry, supply, dead volume) reach the model that
+    identification and diagnosis compare with the recording, as they reach the fit:
+    at the true load the model reproduces a noise-free recording of that rig, where the
+    reference rig's values miss it by a quarter of the stroke."""
+    from boomfmi.physics import reference_rig as ref
+    over = {"b": ref.b * 1.04, "P_s": ref.P_s - 1.0e5, "V_a0": 2 * ref.V_a0}
+    prof = paper_multistep()
+    data = run_offline({"params": over, "noise": {"p_sigma": 0.0, "alpha_sigma": 0.0, "quantise": False}},
+                       prof, prof.duration)
+    truth = {k: getattr(ref, k) for k in ("K_v", "F_s", "F_d", "F_L", "M")}
+    at_rig = read_recording(write_recording(tmp_path / "at_rig.csv", data, sidecar={"rig": over}))
+    assert max(nrmse(simulate_recording(truth, at_rig), at_rig).values()) < 1e-4
+    unlabelled = read_recording(write_recording(tmp_path / "unlabelled.csv", data))
+    assert nrmse(simulate_recording(truth, unlabelled), unlabelled)["x"] > 0.1

@@ -57,14 +57,20 @@ def initial_state(rec) -> tuple[float, float, float]:
     return (x0, float(rec.data["p_a"].iloc[0]) + rec.P_atm, float(rec.data["p_b"].iloc[0]) + rec.P_atm)
 
 
-def model_for(values: dict, effects: dict | None = None):
-    """A ``reference.Model`` with the identified values in place of the reference rig's
-    (and candidate ``effects`` switched on)."""
+def model_for(values: dict, effects: dict | None = None, rec=None):
+    """A ``reference.Model`` at the reference rig, or at the rig of the recording ``rec``
+    (its sidecar's values over the reference rig's, as identification used them), with
+    the identified ``values`` in place of its load (and ``A_max``) and the candidate
+    ``effects`` switched on."""
     from ..reference import Model
-    load = ph.Load(**{k: values[k] for k in ph.Load._fields if k in values
-                      and math.isfinite(values[k])})
-    valve = ph.Valve(A_max=values["A_max"]) if "A_max" in values else ph.Valve()
-    return Model(load=load, valve=valve, effects=dict(effects or {}))
+    rig_of = rec.rig_tuple if rec is not None else (lambda cls: cls())
+    load = rig_of(ph.Load)._replace(**{k: values[k] for k in ph.Load._fields
+                                      if k in values and math.isfinite(values[k])})
+    valve = rig_of(ph.Valve)
+    if "A_max" in values:
+        valve = valve._replace(A_max=values["A_max"])
+    return Model(valve=valve, gas=rig_of(ph.Gas), cylinder=rig_of(ph.Cylinder), geometry=rig_of(ph.Geometry),
+                 load=load, P_atm=rec.P_atm if rec is not None else Model.P_atm, effects=dict(effects or {}))
 
 
 def simulate_recording(values: dict, rec, effects: dict | None = None, rtol: float = 1e-9):
@@ -78,7 +84,7 @@ def simulate_recording(values: dict, rec, effects: dict | None = None, rtol: flo
     def command(s):
         i = max(0, int(np.searchsorted(t, s + 1e-9, side="right")) - 1)
         return {"u": float(u[i])}
-    model = model_for(values, effects)
+    model = model_for(values, effects, rec)
     model.x0, model.p_a0, model.p_b0 = initial_state(rec)
     sim = simulate_reference(model, command, float(t[-1]), times=t - t[0], breakpoints=changes - t[0],
                              rtol=rtol)
@@ -88,8 +94,9 @@ def simulate_recording(values: dict, rec, effects: dict | None = None, rtol: flo
 
 
 def recorded(rec) -> dict:
-    """A recording's x (Eq. 12 from its alpha), p_a and p_b (gauge) as arrays."""
-    return {"x": ph.x_from_alpha(rec.data["alpha"].to_numpy(dtype=float)),
+    """A recording's x (Eq. 12 from its alpha, at its rig's geometry), p_a and p_b
+    (gauge) as arrays."""
+    return {"x": ph.x_from_alpha(rec.data["alpha"].to_numpy(dtype=float), rec.rig_tuple(ph.Geometry)),
             "p_a": rec.data["p_a"].to_numpy(float), "p_b": rec.data["p_b"].to_numpy(float)}
 
 
