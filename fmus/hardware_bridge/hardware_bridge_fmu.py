@@ -20,8 +20,9 @@ Modes (parameter ``mode``):
   real-time rig the bridge paces itself to the wall clock: one exchange per step, as a
   DAQ tick, sends the command at the slot's start and outputs the rig's latest sample
   (measured at the rig's last tick, so up to one step old), then waits for the slot's
-  end; the round trip falls inside the slot, not after it.  A lost answer holds the last sample and clears link_ok; more than
-  ``loss_budget`` consecutive losses is an fmi2Error.
+  end; the round trip falls inside the slot, not after it.  A lost answer holds the
+  last sample and clears link_ok; more than ``loss_budget`` consecutive losses is an
+  fmi2Error.
 
 Unmodelled effect, off by default: ``tau_sensor`` > 0 passes p_a, p_b and alpha (and
 so x) through a first-order lag, the sensors and their conditioning (sensor_lag,
