@@ -32,6 +32,11 @@ INVALID = [
     ("force_estimator", {"f_max": 0.0}, "f_max"),
     ("force_estimator", {"K_p": -1.0}, "K_p"),
     ("force_estimator", {"rate_max": 0.0}, "rate_max"),
+    ("force_estimator", {"method": "kalman"}, "method"),
+    ("force_estimator", {"f_motion": 0.0}, "f_motion"),
+    ("force_estimator", {"tau_est": -0.004}, "tau_est"),
+    ("force_estimator", {"v_rest": -1e-3}, "v_rest"),
+    ("force_estimator", {"M": 0.0}, "M"),
 ]
 
 
