@@ -32,11 +32,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from boomfmi.experiments import paper_multistep  # noqa: E402
-from boomfmi.reference import Model, simulate_reference  # noqa: E402
+from boomfmi.model import Model  # noqa: E402
+from boomfmi.model.reference import simulate_reference  # noqa: E402
 from boomfmi.system import simulate_ssp  # noqa: E402
 
 STEPS = (1e-4, 2.5e-4, 5e-4, 1e-3, 2e-3)
-CHANNELS = (("x", "boom_load.x"), ("p_a", "cylinder.p_a"), ("p_b", "cylinder.p_b"))
+COLUMNS = (("x", "boom_load.x"), ("p_a", "cylinder.p_a"), ("p_b", "cylinder.p_b"))
 
 
 def explicit_variant(ssp: Path, out: Path) -> Path:
@@ -58,7 +59,7 @@ def nrmse(co, ref) -> dict[str, float]:
     c = co.set_index(np.round(co["time"].to_numpy(), 7))
     idx = r.index.intersection(c.index)
     out = {}
-    for name, col in CHANNELS:
+    for name, col in COLUMNS:
         err = c.loc[idx, col].to_numpy() - r.loc[idx, name].to_numpy()
         out[name] = float(np.sqrt(np.mean(err**2)) / (r[name].max() - r[name].min()))
     return out
@@ -99,7 +100,7 @@ def main(argv=None) -> int:
     lines = ["# Co-simulation accuracy", "",
              "NRMSE (RMS error divided by the reference's range) of the co-simulated piston",
              "position x and chamber pressures p_a, p_b against the monolithic reference",
-             "(`boomfmi.reference`: the same physics functions as one ODE, scipy LSODA,",
+             "(`boomfmi.model.reference`: the same physics functions as one ODE, scipy LSODA,",
              "rtol 1e-9, events for stick/slip and the end stops), on the paper's experiment",
              "(`paper_multistep`, 9 s), for the build/excavator_boom.ssp of this commit.",
              "Made by `python benchmarks/cosim_accuracy.py` on "

@@ -80,10 +80,10 @@ def lag(f_est: np.ndarray, f_ext: np.ndarray, judged: np.ndarray, dt: float, mos
 
 
 def figures(out) -> dict:
-    from boomfmi.physics import reference_rig as rig
+    from boomfmi.physics import reference_rig
     t = out["t"].to_numpy()
     f_ext, f_est, x = out["f_ext"].to_numpy(), out["f_est"].to_numpy(), out["x_measured"].to_numpy()
-    judged = (x > STOP_MARGIN) & (x < rig.L - STOP_MARGIN) & (t >= t[0] + WARM_UP)
+    judged = (x > STOP_MARGIN) & (x < reference_rig.L - STOP_MARGIN) & (t >= t[0] + WARM_UP)
     v = np.gradient(x, t)
     free = judged & (f_ext == 0.0) & (np.abs(v) > MOVING)
     peak = float(np.max(np.abs(f_ext[judged]))) if judged.any() else 0.0

@@ -25,11 +25,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from boomfmi.experiments import holdout_multistep, paper_multistep  # noqa: E402
-from boomfmi.identify import nrmse, simulate_recording  # noqa: E402
+from boomfmi.compare import nrmse, simulate_recording  # noqa: E402
 from boomfmi.identify.fit import identify  # noqa: E402
 from boomfmi.identify.paper import identify_paper  # noqa: E402
 from boomfmi.identify.preprocess import prepare  # noqa: E402
-from boomfmi.physics import reference_rig as rig  # noqa: E402
+from boomfmi.physics import reference_rig  # noqa: E402
 from boomfmi.recording import Recording  # noqa: E402
 from boomfmi.rig.offline import run_offline  # noqa: E402
 
@@ -38,9 +38,9 @@ NAMES = ("K_v", "F_s", "F_d", "F_L", "M")
 
 def parameter_sets(n: int, seed: int = 2026):
     rng = np.random.default_rng(seed)
-    sets = [{k: getattr(rig, k) for k in NAMES}]
+    sets = [{k: getattr(reference_rig, k) for k in NAMES}]
     while len(sets) < n + 1:
-        s = {k: getattr(rig, k) * rng.uniform(0.8, 1.2) for k in NAMES}
+        s = {k: getattr(reference_rig, k) * rng.uniform(0.8, 1.2) for k in NAMES}
         if s["F_s"] > s["F_d"]:                        # static friction above Coulomb
             sets.append(s)
     return sets

@@ -3,18 +3,18 @@ from __future__ import annotations
 
 import pytest
 
-from boomfmi.physics import reference_rig as rig
+from boomfmi.physics import reference_rig
 from boomfmi.system import FmuInstance
 
-k, R, T = rig.k, rig.R, rig.T
+k, R, T = reference_rig.k, reference_rig.R, reference_rig.T
 
 
 def V_a(x):
-    return rig.A_a * x + rig.V_a0
+    return reference_rig.A_a * x + reference_rig.V_a0
 
 
 def V_b(x):
-    return rig.A_b * (rig.L - x) + rig.V_b0
+    return reference_rig.A_b * (reference_rig.L - x) + reference_rig.V_b0
 
 
 @pytest.mark.parametrize("dt", [1e-4, 1e-3, 2e-3])
@@ -30,11 +30,11 @@ def test_closed_chambers_keep_p_v_to_the_k_over_the_full_stroke(fmu, dt):
         for _ in range(n):
             cyl.set(x=x, v=v, mdot_a=0.0, mdot_b=0.0)
             cyl.step(dt)
-            x = min(x + v * dt, rig.L)
+            x = min(x + v * dt, reference_rig.L)
             p = cyl.get("p_a", "p_b")
             worst = max(worst, abs(p["p_a"] * V_a(x) ** k / (p0 * V_a(0) ** k) - 1),
                         abs(p["p_b"] * V_b(x) ** k / (p0 * V_b(0) ** k) - 1))
-        assert x == pytest.approx(rig.L)
+        assert x == pytest.approx(reference_rig.L)
     assert worst < 1e-4
 
 
@@ -47,8 +47,8 @@ def test_initial_pressure_rate_is_eq_7(fmu, mdot_a, mdot_b, x, v):
         cyl.set(mdot_a=mdot_a, mdot_b=mdot_b, x=x, v=v)
         cyl.step(dt)
         p = cyl.get("p_a", "p_b")
-    rate_a = (k * R * T * mdot_a - k * p_a0 * rig.A_a * v) / V_a(x)
-    rate_b = (k * R * T * mdot_b + k * p_b0 * rig.A_b * v) / V_b(x)
+    rate_a = (k * R * T * mdot_a - k * p_a0 * reference_rig.A_a * v) / V_a(x)
+    rate_b = (k * R * T * mdot_b + k * p_b0 * reference_rig.A_b * v) / V_b(x)
     assert (p["p_a"] - p_a0) / dt == pytest.approx(rate_a, rel=1e-5, abs=1e-3)
     assert (p["p_b"] - p_b0) / dt == pytest.approx(rate_b, rel=1e-5, abs=1e-3)
 
@@ -62,7 +62,7 @@ def test_filling_at_rest_matches_the_closed_form(fmu):
         for _ in range(n):
             cyl.step(dt)
         p_a = cyl.get("p_a")["p_a"]
-    assert p_a == pytest.approx(rig.P_atm + k * R * T * mdot * n * dt / V_a(0.02), rel=1e-12)
+    assert p_a == pytest.approx(reference_rig.P_atm + k * R * T * mdot * n * dt / V_a(0.02), rel=1e-12)
 
 
 def test_an_emptying_chamber_is_an_fmi_error_not_a_crash(fmu):

@@ -7,14 +7,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from boomfmi.physics import reference_rig as rig
+from boomfmi.physics import reference_rig
 from boomfmi.recording import write_recording
 from boomfmi.system import FmuError, FmuInstance
 
-k, R, T = rig.k, rig.R, rig.T
+k, R, T = reference_rig.k, reference_rig.R, reference_rig.T
 
 
-def choked(A, P_u=rig.P_s):
+def choked(A, P_u=reference_rig.P_s):
     return A * P_u * math.sqrt(k / (R * T)) * (2 / (k + 1)) ** ((k + 1) / (2 * (k - 1)))
 
 
@@ -26,7 +26,7 @@ def test_valve_dynamics_lags_the_opening(fmu):
         assert valve.get("mdot_a")["mdot_a"] == 0.0              # the spool still sits at 5 V
         valve.step_to(0.0, dt)
         y = 1.0 + 4.0 * math.exp(-dt / tau)                      # first-order, one tau later
-        assert valve.get("mdot_a")["mdot_a"] == pytest.approx(choked(rig.A_max * (5 - y) / 5), rel=1e-9)
+        assert valve.get("mdot_a")["mdot_a"] == pytest.approx(choked(reference_rig.A_max * (5 - y) / 5), rel=1e-9)
 
 
 def test_valve_deadband_closes_small_commands(fmu):
@@ -36,12 +36,12 @@ def test_valve_deadband_closes_small_commands(fmu):
         assert valve.get("mdot_a", "mdot_b") == {"mdot_a": 0.0, "mdot_b": 0.0}
         valve.set(u=1.0)
         opening = (4.0 - 0.3) * 5.0 / 4.7 / 5.0
-        assert valve.get("mdot_a")["mdot_a"] == pytest.approx(choked(rig.A_max * opening), rel=1e-9)
+        assert valve.get("mdot_a")["mdot_a"] == pytest.approx(choked(reference_rig.A_max * opening), rel=1e-9)
 
 
 def test_piston_leakage_lets_the_chambers_creep_together_conserving_air(fmu):
     x = 0.03
-    V_a, V_b = rig.A_a * x + rig.V_a0, rig.A_b * (rig.L - x) + rig.V_b0
+    V_a, V_b = reference_rig.A_a * x + reference_rig.V_a0, reference_rig.A_b * (reference_rig.L - x) + reference_rig.V_b0
     with FmuInstance(fmu("cylinder")) as cyl:
         cyl.initialize(dict(C_leak=2e-11, p_a0=5e5, p_b0=2e5), inputs=dict(x=x))
         for i in range(200):
@@ -57,8 +57,8 @@ def test_turbulent_piston_leakage_is_a_choked_orifice_at_a_large_pressure_ratio(
     A p_a sqrt(k / (R T)) (2 / (k + 1))^((k + 1) / (2 (k - 1))), so over 1 ms chamber A
     (adiabatic) loses k R T mdot dt / V_a of pressure and B gains k R T mdot dt / V_b."""
     x, A, dt = 0.03, 2e-8, 1e-3
-    V_a, V_b = rig.A_a * x + rig.V_a0, rig.A_b * (rig.L - x) + rig.V_b0
-    k, R, T = rig.k, rig.R, rig.T
+    V_a, V_b = reference_rig.A_a * x + reference_rig.V_a0, reference_rig.A_b * (reference_rig.L - x) + reference_rig.V_b0
+    k, R, T = reference_rig.k, reference_rig.R, reference_rig.T
     mdot = A * 5e5 * math.sqrt(k / (R * T)) * (2 / (k + 1)) ** ((k + 1) / (2 * (k - 1)))
     with FmuInstance(fmu("cylinder")) as cyl:
         cyl.initialize(dict(A_leak=A, p_a0=5e5, p_b0=1.5e5), inputs=dict(x=x))
@@ -72,7 +72,7 @@ def test_heat_transfer_lets_a_filled_chamber_cool_down(fmu):
     """Filled fast, the chamber's air is hot (isentropic compression): with the valve shut
     the pressure falls towards the isothermal value of its air mass."""
     x = 0.02
-    V = rig.A_a * x + rig.V_a0
+    V = reference_rig.A_a * x + reference_rig.V_a0
     mdot, t_fill = 2e-3, 0.02
     final = {}
     for h in (0.0, 300.0):
@@ -87,16 +87,16 @@ def test_heat_transfer_lets_a_filled_chamber_cool_down(fmu):
                 cyl.step_to(i * 1e-3, 1e-3)
             final[h] = (after_fill, cyl.get("p_a")["p_a"])
     assert final[0.0][0] == final[0.0][1]                          # off: the pressure holds
-    m = rig.P_atm * V / (R * T) + mdot * t_fill
+    m = reference_rig.P_atm * V / (R * T) + mdot * t_fill
     assert final[300.0][1] == pytest.approx(m * R * T / V, rel=1e-3)  # on: isothermal at the end
     assert final[300.0][1] < final[300.0][0]
 
 
 def test_stribeck_friction_slows_the_breakaway(fmu):
     x0 = 0.03
-    phi = math.pi - math.asin(rig.h / rig.a) - math.acos(
-        (rig.a**2 + (x0 + rig.l_min)**2 - rig.b**2) / (2 * rig.a * (x0 + rig.l_min)))
-    p_a = rig.P_atm + (rig.F_L * math.sin(phi) + 1.3 * rig.F_s * math.cos(phi)) / rig.A_a
+    phi = math.pi - math.asin(reference_rig.h / reference_rig.a) - math.acos(
+        (reference_rig.a**2 + (x0 + reference_rig.l_min)**2 - reference_rig.b**2) / (2 * reference_rig.a * (x0 + reference_rig.l_min)))
+    p_a = reference_rig.P_atm + (reference_rig.F_L * math.sin(phi) + 1.3 * reference_rig.F_s * math.cos(phi)) / reference_rig.A_a
     v = {}
     for v_s in (0.0, 0.02):
         with FmuInstance(fmu("boom_load")) as boom:
@@ -112,7 +112,7 @@ def test_end_cushioning_throttles_the_exhaust_near_the_stroke_end(fmu):
     two agree."""
     def run(l_c, x, steps=20):
         with FmuInstance(fmu("cylinder")) as cyl:
-            cyl.initialize(dict(p_a0=rig.P_s, l_cushion=l_c, A_cushion=1e-7),
+            cyl.initialize(dict(p_a0=reference_rig.P_s, l_cushion=l_c, A_cushion=1e-7),
                            inputs=dict(x=x, mdot_a=-2e-3))
             for k_ in range(steps):
                 cyl.step_to(k_ * 1e-3, 1e-3)

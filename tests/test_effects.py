@@ -6,7 +6,7 @@ import math
 import pytest
 
 from boomfmi.physics import Load, mass_flow
-from boomfmi.physics import reference_rig as rig
+from boomfmi.physics import reference_rig
 from boomfmi.physics import effects as fx
 
 
@@ -54,18 +54,18 @@ def test_stribeck_falls_from_static_to_coulomb():
 
 
 def test_cushion_outflow_is_the_series_of_valve_and_needle():
-    mdot_n = mass_flow(1e-7, rig.P_s, rig.P_e)
-    full = fx.cushion_outflow(-2 * mdot_n, rig.P_s, 0.0, 0.01, 1e-7, rig.P_e)
+    mdot_n = mass_flow(1e-7, reference_rig.P_s, reference_rig.P_e)
+    full = fx.cushion_outflow(-2 * mdot_n, reference_rig.P_s, 0.0, 0.01, 1e-7, reference_rig.P_e)
     assert full == pytest.approx(-2 * mdot_n / math.sqrt(5.0), rel=1e-12)
-    half = fx.cushion_outflow(-2 * mdot_n, rig.P_s, 0.009, 0.01, 1e-7, rig.P_e)   # spear half in
+    half = fx.cushion_outflow(-2 * mdot_n, reference_rig.P_s, 0.009, 0.01, 1e-7, reference_rig.P_e)   # spear half in
     assert half == pytest.approx(-2 * mdot_n / math.sqrt(3.0), rel=1e-12)
     assert -2 * mdot_n < half < full < 0.0
-    assert fx.cushion_outflow(1e-3, rig.P_s, 0.0, 0.01, 1e-7, rig.P_e) == 1e-3        # inflow: check valve
-    assert fx.cushion_outflow(-1e-3, rig.P_s, 0.02, 0.01, 1e-7, rig.P_e) == -1e-3     # outside the cushion
+    assert fx.cushion_outflow(1e-3, reference_rig.P_s, 0.0, 0.01, 1e-7, reference_rig.P_e) == 1e-3        # inflow: check valve
+    assert fx.cushion_outflow(-1e-3, reference_rig.P_s, 0.02, 0.01, 1e-7, reference_rig.P_e) == -1e-3     # outside the cushion
 
 
 def test_cushion_outflow_slope_matches_a_finite_difference():
-    args = (0.0, 0.01, 1e-7, rig.P_e)
+    args = (0.0, 0.01, 1e-7, reference_rig.P_e)
     p, m, s = 4e5, -5e-3, -2e-8
     h = 10.0
     fd = (fx.cushion_outflow(m + s * h, p + h, *args) - fx.cushion_outflow(m - s * h, p - h, *args)) / (2 * h)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from boomfmi import physics as ph
-from boomfmi.physics import reference_rig as rig
+from boomfmi.physics import reference_rig
 from boomfmi.system import FmuError, FmuInstance
 
 DT = 1e-3
@@ -42,7 +42,7 @@ def test_position_error_uses_the_models_pneumatic_stiffness(make):
     est = make(method="position_error", tau_est=0.0)
     p_a, p_b, x_m, dx = 5e5, 3e5, 0.03, 1e-3
     got = run(est, 3, x_model=x_m, v_model=0.0, p_a_model=p_a, p_b_model=p_b, x_measured=x_m - dx)
-    K = rig.k * (p_a * rig.A_a ** 2 / (rig.V_a0 + rig.A_a * x_m) + p_b * rig.A_b ** 2 / (rig.V_b0 + rig.A_b * (rig.L - x_m)))
+    K = reference_rig.k * (p_a * reference_rig.A_a ** 2 / (reference_rig.V_a0 + reference_rig.A_a * x_m) + p_b * reference_rig.A_b ** 2 / (reference_rig.V_b0 + reference_rig.A_b * (reference_rig.L - x_m)))
     assert got["f_est"] == pytest.approx(K * dx, rel=1e-9)
     assert got["f_est"] > 0          # the machine lags the model extending: a force against extension
 
@@ -60,8 +60,8 @@ def test_observer_at_steady_motion_is_eq8_read_backwards(make):
     p_a = 4.5e5                         # gauge
     got = run(est, 500, x_measured=0.03, p_a_measured=p_a, p_b_measured=0.0)
     phi = ph.phi_from_x(0.03, ph.Geometry())
-    drive = ph.piston_force(p_a + rig.P_atm, rig.P_atm) - rig.F_L * math.sin(phi)
-    expected = drive - rig.F_s * math.cos(phi)      # what static friction cannot hold
+    drive = ph.piston_force(p_a + reference_rig.P_atm, reference_rig.P_atm) - reference_rig.F_L * math.sin(phi)
+    expected = drive - reference_rig.F_s * math.cos(phi)      # what static friction cannot hold
     assert expected > 0
     assert got["f_est"] == pytest.approx(expected, rel=1e-6)
 
@@ -70,7 +70,7 @@ def test_observer_reports_nothing_friction_can_hold_at_rest(make):
     est = make(method="observer", tau_est=0.0)
     phi = ph.phi_from_x(0.03, ph.Geometry())
     # the pressure that balances the load, plus half the static friction
-    p_a = (rig.F_L * math.sin(phi) + 0.5 * rig.F_s * math.cos(phi)) / rig.A_a
+    p_a = (reference_rig.F_L * math.sin(phi) + 0.5 * reference_rig.F_s * math.cos(phi)) / reference_rig.A_a
     got = run(est, 300, x_measured=0.03, p_a_measured=p_a, p_b_measured=0.0)
     assert got["f_est"] == pytest.approx(0.0, abs=1e-9)
 
@@ -93,8 +93,8 @@ def test_observer_while_sliding_at_constant_speed(make):
     got = est.get("f_est", "v_measured")
     x = 0.01 + v * 399 * DT - v * 2.0 / (2 * math.pi * 30.0)
     phi = ph.phi_from_x(x, ph.Geometry())
-    expected = (ph.piston_force(p_a + rig.P_atm, p_b + rig.P_atm) - rig.F_L * math.sin(phi)
-                - rig.K_v * v - rig.F_d * math.cos(phi))
+    expected = (ph.piston_force(p_a + reference_rig.P_atm, p_b + reference_rig.P_atm) - reference_rig.F_L * math.sin(phi)
+                - reference_rig.K_v * v - reference_rig.F_d * math.cos(phi))
     assert got["v_measured"] == pytest.approx(v, rel=1e-6)
     assert got["f_est"] == pytest.approx(expected, abs=0.5)
 
@@ -105,14 +105,14 @@ def test_a_reading_at_the_sensors_floor_gives_way_to_the_models_vacuum(make, p_f
     the model's -0.5 bar, unless the floor is switched off."""
     est = make(method="observer", tau_est=0.0, p_floor=p_floor)
     v, p_a = -0.05, 0.3e5
-    est.set(p_a_measured=p_a, p_b_measured=0.0, p_a_model=p_a + rig.P_atm, p_b_model=rig.P_atm - 0.5e5)
+    est.set(p_a_measured=p_a, p_b_measured=0.0, p_a_model=p_a + reference_rig.P_atm, p_b_model=reference_rig.P_atm - 0.5e5)
     for k in range(400):
         est.set(x_measured=0.05 + v * k * DT)
         est.step(DT)
     x = 0.05 + v * 399 * DT - v * 2.0 / (2 * math.pi * 30.0)
     phi = ph.phi_from_x(x, ph.Geometry())
-    expected = (ph.piston_force(p_a + rig.P_atm, seen + rig.P_atm) - rig.F_L * math.sin(phi)
-                - rig.K_v * v + rig.F_d * math.cos(phi))
+    expected = (ph.piston_force(p_a + reference_rig.P_atm, seen + reference_rig.P_atm) - reference_rig.F_L * math.sin(phi)
+                - reference_rig.K_v * v + reference_rig.F_d * math.cos(phi))
     assert est.get("f_est")["f_est"] == pytest.approx(expected, abs=0.5)
 
 
@@ -166,7 +166,7 @@ def _teleoperate(ssp_path, tmp_path, contact, method="observer"):
 def test_no_contact_gives_no_force_within_the_noise(ssp_path, tmp_path):
     out = _teleoperate(ssp_path, tmp_path, None)
     moving = np.abs(np.gradient(out["x_measured"], out["t"])) > 5e-3
-    judged = (out["x_measured"] > 1e-3) & (out["x_measured"] < rig.L - 1e-3)
+    judged = (out["x_measured"] > 1e-3) & (out["x_measured"] < reference_rig.L - 1e-3)
     f = out["f_est"][judged].to_numpy()
     assert moving[judged].mean() > 0.3                       # the run does move
     assert np.sqrt(np.mean(f ** 2)) < 40.0                   # N: the rig's noise, through M a
@@ -176,7 +176,7 @@ def test_no_contact_gives_no_force_within_the_noise(ssp_path, tmp_path):
 def test_a_known_constant_force_is_found_with_its_sign(ssp_path, tmp_path):
     """150 N against extension from t = 0: lifting, the observer finds it."""
     out = _teleoperate(ssp_path, tmp_path, {"type": "ramp", "start": 0.0, "rate": 1e6, "max": 150.0, "sign": 1})
-    judged = ((out["x_measured"] > 1e-3) & (out["x_measured"] < rig.L - 1e-3) & (out["t"] > 0.35)).to_numpy()
+    judged = ((out["x_measured"] > 1e-3) & (out["x_measured"] < reference_rig.L - 1e-3) & (out["t"] > 0.35)).to_numpy()
     assert np.allclose(out["f_ext"][judged], 150.0)
     f = out["f_est"][judged].to_numpy()
     assert np.median(f) == pytest.approx(150.0, rel=0.1)

@@ -10,9 +10,10 @@ import pytest
 
 from boomfmi.cli import main
 from boomfmi.experiments import holdout_multistep, paper_multistep
-from boomfmi.identify import identify_recordings, nrmse, simulate_recording
+from boomfmi.compare import nrmse, simulate_recording
+from boomfmi.identify import identify_recordings
 from boomfmi.identify.paper import solve_printed_eq17
-from boomfmi.physics import reference_rig as rig
+from boomfmi.physics import reference_rig
 from boomfmi.recording import RecordingError, read_recording, write_recording
 from boomfmi.rig.offline import run_offline
 from boomfmi.system.ssv import read_ssv
@@ -55,7 +56,7 @@ def test_A_max_from_the_chambers_mass_balance(recordings):
     d, _ = recordings
     result, _, _ = identify_recordings([d / "fit.csv"], "fit", with_A_max=True)
     est = result.params["A_max"]
-    assert est.value == pytest.approx(rig.A_max, rel=0.1)
+    assert est.value == pytest.approx(reference_rig.A_max, rel=0.1)
     assert est.ci95[0] < est.value < est.ci95[1]
 
 
@@ -121,12 +122,11 @@ def test_the_model_runs_at_the_recordings_rig(tmp_path):
     identification and diagnosis compare with the recording, as they reach the fit:
     at the true load the model reproduces a noise-free recording of that rig, where the
     reference rig's values miss it by a quarter of the stroke."""
-    from boomfmi.physics import reference_rig as ref
-    over = {"b": ref.b * 1.04, "P_s": ref.P_s - 1.0e5, "V_a0": 2 * ref.V_a0}
+    over = {"b": reference_rig.b * 1.04, "P_s": reference_rig.P_s - 1.0e5, "V_a0": 2 * reference_rig.V_a0}
     prof = paper_multistep()
     data = run_offline({"params": over, "noise": {"p_sigma": 0.0, "alpha_sigma": 0.0, "quantise": False}},
                        prof, prof.duration)
-    truth = {k: getattr(ref, k) for k in ("K_v", "F_s", "F_d", "F_L", "M")}
+    truth = {k: getattr(reference_rig, k) for k in ("K_v", "F_s", "F_d", "F_L", "M")}
     at_rig = read_recording(write_recording(tmp_path / "at_rig.csv", data, sidecar={"rig": over}))
     assert max(nrmse(simulate_recording(truth, at_rig), at_rig).values()) < 1e-4
     unlabelled = read_recording(write_recording(tmp_path / "unlabelled.csv", data))

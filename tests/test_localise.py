@@ -6,10 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from boomfmi import physics as ph
+from boomfmi.compare import simulate_recording
 from boomfmi.diagnose import REGIMES, localise, regimes
 from boomfmi.experiments import paper_multistep
-from boomfmi.identify import simulate_recording
+from boomfmi.model import Model
 from boomfmi.identify.preprocess import prepare
 from boomfmi.recording import Recording
 from boomfmi.rig.offline import run_offline
@@ -23,7 +23,7 @@ def localised(effect):
     sim = simulate_recording({}, rec)                 # the baseline at the rig's true parameters
     sim["p_a"] += rec.P_atm
     sim["p_b"] += rec.P_atm
-    return p, localise(p, sim, ph.Load())
+    return p, localise(p, sim, Model())
 
 
 def test_regimes_cover_the_experiment():

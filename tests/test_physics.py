@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from boomfmi import physics as ph
-from boomfmi.physics import reference_rig as rig
+from boomfmi.physics import reference_rig
 
 
 def test_scalar_and_array_paths_agree():
@@ -20,14 +20,14 @@ def test_scalar_and_array_paths_agree():
         sa, sb = ph.chamber_flows(float(u[i]), float(p_a[i]), float(p_b[i]))
         assert sa == pytest.approx(arr_a[i], rel=1e-13, abs=1e-18)
         assert sb == pytest.approx(arr_b[i], rel=1e-13, abs=1e-18)
-    x = rng.uniform(0, rig.L, 50)
+    x = rng.uniform(0, reference_rig.L, 50)
     np.testing.assert_allclose(ph.phi_from_x(x), [ph.phi_from_x(float(v)) for v in x], rtol=1e-14)
 
 
 def test_x_alpha_x_round_trip():
-    x = np.linspace(0.0, rig.L, 10001)
+    x = np.linspace(0.0, reference_rig.L, 10001)
     np.testing.assert_allclose(ph.x_from_alpha(ph.alpha_from_x(x)), x, rtol=0, atol=1e-12)
-    for v in (0.0, 0.017, rig.L):
+    for v in (0.0, 0.017, reference_rig.L):
         assert abs(ph.x_from_alpha(ph.alpha_from_x(v)) - v) < 1e-12
 
 
@@ -109,5 +109,5 @@ def test_friction_force_is_eq_9():
 
 def test_geometry_check_names_the_parameter():
     with pytest.raises(ph.ParameterError, match="parameter h"):
-        ph.check_geometry(ph.Geometry(h=0.2), rig.L)
-    ph.check_geometry(ph.Geometry(), rig.L)
+        ph.check_geometry(ph.Geometry(h=0.2), reference_rig.L)
+    ph.check_geometry(ph.Geometry(), reference_rig.L)

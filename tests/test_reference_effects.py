@@ -6,7 +6,8 @@ import pytest
 
 from boomfmi.experiments import paper_multistep
 from boomfmi.physics import ParameterError
-from boomfmi.reference import Model, simulate_reference
+from boomfmi.model import Model
+from boomfmi.model.reference import simulate_reference
 from boomfmi.system import simulate_ssp
 
 CASES = [

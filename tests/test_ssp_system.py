@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from boomfmi.experiments import paper_multistep
-from boomfmi.physics import reference_rig as rig
-from boomfmi.reference import Model, simulate_reference
+from boomfmi.physics import reference_rig
+from boomfmi.model import Model
+from boomfmi.model.reference import simulate_reference
 from boomfmi.system import CoSimulation, SspError, simulate_ssp
 from boomfmi.system.ssp import read_ssp, validate_ssd
 from boomfmi.system.ssv import read_ssv, write_ssv
@@ -42,11 +43,11 @@ def test_schema_violation_is_reported_with_its_line(ssp_path, tmp_path):
 
 def test_reference_parameter_set_is_the_reference_rig():
     params = read_ssv(ROOT.joinpath("ssp", "reference_rig.ssv").read_bytes(), "reference_rig.ssv")
-    expected = {"valve.P_s": rig.P_s, "valve.A_max": rig.A_max, "valve.T": rig.T,
-                "cylinder.A_b": rig.A_b, "cylinder.V_a0": rig.V_a0, "cylinder.L": rig.L,
-                "boom_load.K_v": rig.K_v, "boom_load.F_s": rig.F_s, "boom_load.F_d": rig.F_d,
-                "boom_load.F_L": rig.F_L, "boom_load.M": rig.M, "boom_load.a": rig.a,
-                "boom_load.l_min": rig.l_min}
+    expected = {"valve.P_s": reference_rig.P_s, "valve.A_max": reference_rig.A_max, "valve.T": reference_rig.T,
+                "cylinder.A_b": reference_rig.A_b, "cylinder.V_a0": reference_rig.V_a0, "cylinder.L": reference_rig.L,
+                "boom_load.K_v": reference_rig.K_v, "boom_load.F_s": reference_rig.F_s, "boom_load.F_d": reference_rig.F_d,
+                "boom_load.F_L": reference_rig.F_L, "boom_load.M": reference_rig.M, "boom_load.a": reference_rig.a,
+                "boom_load.l_min": reference_rig.l_min}
     for name, value in expected.items():
         assert params[name].value == value, name
     assert params["valve.A_max"].unit == "m2"
@@ -55,7 +56,7 @@ def test_reference_parameter_set_is_the_reference_rig():
 def test_packed_parameter_sets_are_per_component_with_bare_names(ssp_path):
     with zipfile.ZipFile(ssp_path) as z:
         part = read_ssv(z.read("resources/reference_rig_boom_load.ssv"), "boom_load part")
-    assert part["M"].value == rig.M and "boom_load.M" not in part
+    assert part["M"].value == reference_rig.M and "boom_load.M" not in part
     assert all("." not in n for n in part)
 
 
@@ -64,9 +65,9 @@ def test_first_row_is_t0_at_the_fmus_start_values(ssp_path):
     np.testing.assert_array_equal(result["time"], np.round(np.arange(11) * 1e-3, 12))
     first = result.iloc[0]
     assert first["time"] == 0.0
-    assert first["cylinder.p_a"] == rig.P_atm and first["cylinder.p_b"] == rig.P_atm
+    assert first["cylinder.p_a"] == reference_rig.P_atm and first["cylinder.p_b"] == reference_rig.P_atm
     assert first["boom_load.x"] == 0.0 and first["valve.u"] == 5.0
-    assert first["boom_load.alpha"] == pytest.approx(math.acos((rig.a**2 + rig.b**2 - rig.l_min**2) / (2 * rig.a * rig.b)))
+    assert first["boom_load.alpha"] == pytest.approx(math.acos((reference_rig.a**2 + reference_rig.b**2 - reference_rig.l_min**2) / (2 * reference_rig.a * reference_rig.b)))
 
 
 def test_rows_belong_to_their_time(ssp_path):
@@ -76,7 +77,7 @@ def test_rows_belong_to_their_time(ssp_path):
                           inputs=lambda t: {"valve.u": 0.0 if t >= 0.005 - 1e-9 else 5.0})
     assert list(result["valve.u"][:7]) == [5, 5, 5, 5, 5, 0, 0]
     assert result["valve.mdot_a"][4] == 0.0 and result["valve.mdot_a"][5] > 0.0
-    assert result["cylinder.p_a"][5] == rig.P_atm and result["cylinder.p_a"][6] > rig.P_atm
+    assert result["cylinder.p_a"][5] == reference_rig.P_atm and result["cylinder.p_a"][6] > reference_rig.P_atm
 
 
 @pytest.mark.parametrize("algorithm", ["gauss-seidel", "jacobi"])
@@ -96,7 +97,7 @@ def test_extra_parameters_are_applied(ssp_path, tmp_path):
     assert moved["boom_load.x"][0] == 0.03
     ssv = write_ssv(tmp_path / "closed.ssv", "closed", {"valve.A_max": (0.0, "m2")})
     closed = simulate_ssp(ssp_path, stop_time=0.5, inputs=extend, parameters=ssv)
-    assert (closed["cylinder.p_b"] == rig.P_atm).all()
+    assert (closed["cylinder.p_b"] == reference_rig.P_atm).all()
 
 
 def test_component_binding_is_applied(ssp_path, tmp_path):

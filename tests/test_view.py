@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from boomfmi.physics import Geometry, alpha_from_x, cylinder_length, linkage_points, phi_from_x
-from boomfmi.physics import reference_rig as rig
+from boomfmi.physics import reference_rig
 from boomfmi.view.frames import live_frame, load_run
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,7 +39,7 @@ def contact_run(ssp_path, tmp_path_factory) -> Path:
     from boomfmi.simulate import replay_parameters, run_experiment
     tmp = tmp_path_factory.mktemp("view")
     cfg = json.loads((ROOT / "examples" / "rig" / "contact_soft.json").read_text())
-    rec = write_recording(tmp / "rig.csv", run_offline(cfg, dig(), 4.0))
+    rec = write_recording(tmp / "reference_rig.csv", run_offline(cfg, dig(), 4.0))
     out = run_experiment(ssp_path.parent / "teleoperation.ssp", str(rec), parameters=[replay_parameters(rec)])
     path = tmp / "run.csv"
     out.to_csv(path, index=False, float_format="%.10g")
@@ -68,7 +68,7 @@ def test_run_frames_are_the_recording_at_its_samples(contact_run):
         assert f["model"]["alpha"] == pytest.approx(data["alpha"][k], abs=1e-12)
         assert f["f_est"] == pytest.approx(data["f_est"][k], abs=1e-9)
         T = f["machine"]["T"]
-        assert math.atan2(T[1], T[0]) == pytest.approx(data["alpha_measured"][k] - math.asin(rig.h / rig.a))
+        assert math.atan2(T[1], T[0]) == pytest.approx(data["alpha_measured"][k] - math.asin(reference_rig.h / reference_rig.a))
     mid = run.frame(0.5 * (data["t"][10] + data["t"][11]))       # between samples: linear
     assert mid["machine"]["alpha"] == pytest.approx(0.5 * (data["alpha_measured"][10] + data["alpha_measured"][11]))
 
@@ -106,11 +106,11 @@ def test_live_sender_reaches_the_hub_as_frames():
                  "hardware_bridge.alpha", "hardware_bridge.p_a", "force_estimator.f_est"]
         sender = LiveSender(f"udp://127.0.0.1:{port}",
                             {"alpha": ("boom_load.alpha", 0.0), "x": ("boom_load.x", 0.0),
-                             "p_a": ("cylinder.p_a", -rig.P_atm), "p_b": ("cylinder.p_b", -rig.P_atm),
+                             "p_a": ("cylinder.p_a", -reference_rig.P_atm), "p_b": ("cylinder.p_b", -reference_rig.P_atm),
                              "alpha_measured": ("hardware_bridge.alpha", 0.0),
                              "p_a_measured": ("hardware_bridge.p_a", 0.0), "f_est": ("force_estimator.f_est", 0.0)},
-                            [rig.a, rig.b, rig.h, rig.l_min], rate=1e6)
-        sender(names, np.array([1.25, 0.80, 0.03, rig.P_atm + 2e5, rig.P_atm + 1e5, 0.75, 1.5e5, -320.0]))
+                            [reference_rig.a, reference_rig.b, reference_rig.h, reference_rig.l_min], rate=1e6)
+        sender(names, np.array([1.25, 0.80, 0.03, reference_rig.P_atm + 2e5, reference_rig.P_atm + 1e5, 0.75, 1.5e5, -320.0]))
         for _ in range(100):
             if hub.history:
                 break
@@ -275,7 +275,7 @@ def test_the_page_reconnects_after_its_websocket_drops(contact_run, driver):
 
 @browser
 def test_live_view_beside_a_running_teleoperation(contact_run, ssp_path, driver, tmp_path):
-    rec = contact_run.parent / "rig.csv"
+    rec = contact_run.parent / "reference_rig.csv"
     udp = _free_port()
     view = View("--live", f"udp://127.0.0.1:{udp}")
     try:

@@ -6,23 +6,24 @@ cylinder angle phi (Eq. 8 to 12).  Within a step the pressures and f_ext are hel
 motion is integrated in short substeps with the exact stick/slip rule of
 ``physics.load``, and x never leaves [0, L].
 
-Unmodelled effect, off by default (``physics/effects.py``): ``v_s`` > 0 makes the
+Unmodelled effect, off by default (``model/catalogue.py``, form in ``physics/effects.py``): ``v_s`` > 0 makes the
 Coulomb friction fall from F_s to F_d as speed rises (stribeck_friction).  The end
 cushioning acts on the exhaust air, so it is the cylinder's option.
 """
-from boomfmi_boom_load_lib.fmislave import GEOMETRY, LOAD, BoomSlave, input, output, parameter, rig_parameters
-from boomfmi_boom_load_lib.physics import (Cylinder, Geometry, Load, ParameterError, advance_load,
-                                           alpha_from_x, check_geometry, check_load, phi_from_x)
-from boomfmi_boom_load_lib.physics import reference_rig as rig
-from boomfmi_boom_load_lib.physics.effects import stribeck_load
+from boomfmi_boom_load_lib.fmislave import (GEOMETRY, LOAD, BoomSlave, effect_options, input,
+                                           option_values, output, parameter, rig_parameters)
+from boomfmi_boom_load_lib.model import Boom, Model, effects_from_options
+from boomfmi_boom_load_lib.physics import (Cylinder, Geometry, Load, ParameterError, alpha_from_x,
+                                           check_geometry, check_load, phi_from_x)
+from boomfmi_boom_load_lib.physics import reference_rig
 from boomfmi_boom_load_lib.physics.validation import require_positive
 
 
 class BoomLoad(BoomSlave):
     description = "Boom load with static/Coulomb/viscous friction and hard end stops (paper Eq. 8 to 12)"
     variables = (
-        input("p_a", rig.P_atm, "Pa", "absolute pressure in chamber A (cap side)", min=0.0),
-        input("p_b", rig.P_atm, "Pa", "absolute pressure in chamber B (rod side)", min=0.0),
+        input("p_a", reference_rig.P_atm, "Pa", "absolute pressure in chamber A (cap side)", min=0.0),
+        input("p_b", reference_rig.P_atm, "Pa", "absolute pressure in chamber B (rod side)", min=0.0),
         input("f_ext", 0.0, "N", "external force on the piston along the cylinder axis, positive against extension"),
         output("x", 0.0, "m", "piston position, 0 = fully retracted", min=0.0),
         output("v", 0.0, "m/s", "piston velocity, positive extending"),
@@ -30,28 +31,28 @@ class BoomLoad(BoomSlave):
         output("phi", 0.0, "rad", "angle between the cylinder axis and the horizontal (Eq. 10)"),
         *rig_parameters(*LOAD, *GEOMETRY, "A_a", "A_b", "P_atm"),
         parameter("x0", 0.0, "m", "initial piston position", min=0.0),
-        parameter("v_s", 0.0, "m/s", "stribeck_friction: Stribeck velocity of exp(-|v|/v_s); 0: off (the paper's step)", min=0.0),
+        *effect_options("boom_load"),
     )
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self.modelName = "boom_load"
-        self._cyl, self._geom, self._load = Cylinder(), Geometry(), Load()
-        self._load_at = None
+        self._boom = None
+        self._geom = Geometry()
 
     def setup(self):
-        self._load = Load(K_v=self.K_v, F_s=self.F_s, F_d=self.F_d, F_L=self.F_L, M=self.M)
+        load = Load(K_v=self.K_v, F_s=self.F_s, F_d=self.F_d, F_L=self.F_L, M=self.M)
         self._geom = Geometry(a=self.a, b=self.b, h=self.h, l_min=self.l_min)
-        self._cyl = Cylinder(A_a=self.A_a, A_b=self.A_b, L=self.L)
-        check_load(self._load)
+        check_load(load)
         for name in ("L", "A_a", "A_b", "P_atm"):
             require_positive(name, getattr(self, name))
         check_geometry(self._geom, self.L)
         if not 0.0 <= self.x0 <= self.L:
             raise ParameterError("x0", self.x0, f"must lie within the stroke [0, {self.L:g}] m")
+        effects = effects_from_options("boom_load", option_values(self, "boom_load"))
+        self._boom = Boom(Model(cylinder=Cylinder(A_a=self.A_a, A_b=self.A_b, L=self.L), geometry=self._geom,
+                                load=load, P_atm=self.P_atm, effects=effects), check=False)
         self.x, self.v = float(self.x0), 0.0
-        v_s = self.v_s
-        self._load_at = (lambda load, v: stribeck_load(load, v, v_s)) if v_s > 0.0 else None
 
     @property
     def alpha(self):
@@ -62,6 +63,4 @@ class BoomLoad(BoomSlave):
         return phi_from_x(self.x, self._geom)
 
     def step(self, t, dt):
-        self.x, self.v = advance_load(self.x, self.v, dt, self.p_a, self.p_b, self.f_ext,
-                                      self._cyl, self._geom, self._load, self.P_atm,
-                                      load_at=self._load_at)
+        self.x, self.v = self._boom.step_load(self.x, self.v, dt, self.p_a, self.p_b, self.f_ext)

@@ -29,7 +29,7 @@ from boomfmi_force_estimator_lib.physics import (Cylinder, Gas, Geometry, Load, 
                                                  measured_drive_force, motion_filter_step, first_order_step,
                                                  observed_external_force, pneumatic_stiffness,
                                                  position_error_force, reflected_force)
-from boomfmi_force_estimator_lib.physics import reference_rig as rig
+from boomfmi_force_estimator_lib.physics import reference_rig
 from boomfmi_force_estimator_lib.physics.validation import require_non_negative, require_positive
 
 METHODS = ("position_error", "observer")
@@ -40,8 +40,8 @@ class ForceEstimator(BoomSlave):
     variables = (
         input("x_model", 0.0, "m", "position_error: piston position of the model"),
         input("v_model", 0.0, "m/s", "position_error: piston velocity of the model"),
-        input("p_a_model", rig.P_atm, "Pa", "absolute chamber A pressure of the model (position_error: its stiffness; observer: below the sensor's floor)", min=0.0),
-        input("p_b_model", rig.P_atm, "Pa", "absolute chamber B pressure of the model (position_error: its stiffness; observer: below the sensor's floor)", min=0.0),
+        input("p_a_model", reference_rig.P_atm, "Pa", "absolute chamber A pressure of the model (position_error: its stiffness; observer: below the sensor's floor)", min=0.0),
+        input("p_b_model", reference_rig.P_atm, "Pa", "absolute chamber B pressure of the model (position_error: its stiffness; observer: below the sensor's floor)", min=0.0),
         input("x_measured", 0.0, "m", "piston position of the machine"),
         input("p_a_measured", 0.0, "Pa", "observer: measured chamber A pressure, gauge (as the bridge gives it)"),
         input("p_b_measured", 0.0, "Pa", "observer: measured chamber B pressure, gauge (as the bridge gives it)"),
@@ -50,7 +50,7 @@ class ForceEstimator(BoomSlave):
         output("v_measured", 0.0, "m/s", "the machine's piston velocity, from the filtered measured position"),
         parameter("method", "observer", "1", "position_error (the paper's) or observer", type="String"),
         parameter("K_p", 0.0, "N/m", "position_error: calibrated stiffness; 0: the model's pneumatic stiffness at its state", min=0.0),
-        parameter("D", rig.K_v, "N.s/m", "position_error: velocity-error gain; default the viscous friction K_v", min=0.0),
+        parameter("D", reference_rig.K_v, "N.s/m", "position_error: velocity-error gain; default the viscous friction K_v", min=0.0),
         parameter("f_motion", 30.0, "Hz", "corner frequency of the critically damped filter of the measured position", min=0.0),
         parameter("tau_est", 0.004, "s", "time constant of the estimate's low-pass; 0: none", min=0.0),
         parameter("v_rest", 2e-3, "m/s", "observer: below this filtered speed the piston counts as at rest", min=0.0),

@@ -7,66 +7,61 @@ pressure, which lets the cylinder integrate its chambers against the valve's loc
 linearisation (stable coupling at any communication step).  The outputs depend
 directly on the inputs.
 
-Unmodelled effects, off by default (``physics/effects.py``): ``tau_spool`` > 0 lets the
+Unmodelled effects, off by default (``model/catalogue.py``, forms in ``physics/effects.py``): ``tau_spool`` > 0 lets the
 spool follow the command with a first-order lag (valve_dynamics; the spool position is
 then the FMU's state), ``deadband`` > 0 closes a band of commands around 5 V
 (valve_deadband).
 """
-from boomfmi_valve_lib.fmislave import BoomSlave, input, output, parameter, rig_parameters
-from boomfmi_valve_lib.physics import (Gas, Valve as ValveParams, chamber_flow_slopes, chamber_flows,
-                                       check_gas, check_valve)
-from boomfmi_valve_lib.physics import reference_rig as rig
-from boomfmi_valve_lib.physics.effects import deadband_command, spool_lag_step
+from boomfmi_valve_lib.fmislave import (BoomSlave, effect_options, input, option_values, output, parameter,
+                                       rig_parameters)
+from boomfmi_valve_lib.model import Boom, Model, effects_from_options
+from boomfmi_valve_lib.physics import Gas, Valve as ValveParams, check_gas, check_valve
+from boomfmi_valve_lib.physics import reference_rig
 
 
 class Valve(BoomSlave):
     description = "Proportional 5/3 valve: orifice mass flows into chambers A and B (paper Eq. 1)"
     variables = (
-        input("u", rig.u_centre, "V", "valve command; 5 V closes every port, below 5 V supply -> A (extend), above 5 V supply -> B (retract)", min=0.0, max=10.0),
-        input("p_a", rig.P_atm, "Pa", "absolute pressure in chamber A (cap side)", min=0.0),
-        input("p_b", rig.P_atm, "Pa", "absolute pressure in chamber B (rod side)", min=0.0),
+        input("u", reference_rig.u_centre, "V", "valve command; 5 V closes every port, below 5 V supply -> A (extend), above 5 V supply -> B (retract)", min=0.0, max=10.0),
+        input("p_a", reference_rig.P_atm, "Pa", "absolute pressure in chamber A (cap side)", min=0.0),
+        input("p_b", reference_rig.P_atm, "Pa", "absolute pressure in chamber B (rod side)", min=0.0),
         output("mdot_a", 0.0, "kg/s", "mass flow into chamber A (negative when A exhausts)", depends=("u", "p_a", "p_b")),
         output("mdot_b", 0.0, "kg/s", "mass flow into chamber B (negative when B exhausts)", depends=("u", "p_a", "p_b")),
         output("dmdot_a_dp_a", 0.0, "kg/(s.Pa)", "slope of mdot_a with respect to p_a (<= 0)", depends=("u", "p_a", "p_b"), max=0.0),
         output("dmdot_b_dp_b", 0.0, "kg/(s.Pa)", "slope of mdot_b with respect to p_b (<= 0)", depends=("u", "p_a", "p_b"), max=0.0),
         *rig_parameters("P_s", "P_e"),
-        parameter("A_max", rig.A_max, "m2", "orifice area of each port at full opening", min=0.0),
+        parameter("A_max", reference_rig.A_max, "m2", "orifice area of each port at full opening", min=0.0),
         *rig_parameters("T", "k", "R"),
-        parameter("tau_spool", 0.0, "s", "valve_dynamics: time constant of the spool's first-order lag; 0: off", min=0.0),
-        parameter("deadband", 0.0, "V", "valve_deadband: half-width of the closed band around 5 V; 0: off", min=0.0, max=4.9),
+        *effect_options("valve"),
     )
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self.modelName = "valve"
-        self._valve, self._gas = ValveParams(), Gas()
+        self._boom = Boom(Model(), check=False)    # until setup: the reference rig, no effects
         self._key = None
         self._flows = (0.0, 0.0, 0.0, 0.0)
-        self._spool = rig.u_centre
+        self._spool = reference_rig.u_centre
 
     def setup(self):
-        self._valve = ValveParams(A_max=self.A_max, P_s=self.P_s, P_e=self.P_e)
-        self._gas = Gas(k=self.k, R=self.R, T=self.T)
-        check_valve(self._valve)
-        check_gas(self._gas)
+        valve = ValveParams(A_max=self.A_max, P_s=self.P_s, P_e=self.P_e)
+        gas = Gas(k=self.k, R=self.R, T=self.T)
+        check_valve(valve)
+        check_gas(gas)
+        effects = effects_from_options("valve", option_values(self, "valve"))
+        self._boom = Boom(Model(valve=valve, gas=gas, effects=effects), check=False)
         self._spool = self.u
         self._key = None
 
-    def _opening_command(self):
-        """The command the orifices see: the spool's lagged position, through the dead band."""
-        y = self._spool if self.tau_spool > 0.0 else self.u
-        return deadband_command(y, self.deadband) if self.deadband > 0.0 else y
-
     def _current_flows(self):
-        u = self._opening_command()
+        u = self._boom.opening(self._spool if self.tau_spool > 0.0 else self.u)
         key = (u, self.p_a, self.p_b)
         if key != self._key:
             if not (self.p_a > 0.0 and self.p_b > 0.0):
                 self.fail(f"input pressures must be > 0 Pa absolute, got p_a = {self.p_a!r}, p_b = {self.p_b!r}")
                 self._flows = (0.0, 0.0, 0.0, 0.0)
             else:
-                self._flows = (*chamber_flows(u, self.p_a, self.p_b, self._valve, self._gas),
-                               *chamber_flow_slopes(u, self.p_a, self.p_b, self._valve, self._gas))
+                self._flows = self._boom.valve_flows(u, self.p_a, self.p_b)
             self._key = key
         return self._flows
 
@@ -87,5 +82,4 @@ class Valve(BoomSlave):
         return self._current_flows()[3]
 
     def step(self, t, dt):
-        if self.tau_spool > 0.0:
-            self._spool = spool_lag_step(self._spool, self.u, dt, self.tau_spool)
+        self._spool = self._boom.spool_step(self._spool, self.u, dt)

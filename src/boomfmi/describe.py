@@ -3,10 +3,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from fmpy import read_model_description
+
 
 def interface_table(path) -> str:
     """Markdown table of an FMU's variables: name, causality, unit, start, bounds, meaning."""
-    from fmpy import read_model_description
     md = read_model_description(str(path))
     order = {"input": 0, "output": 1, "parameter": 2}
     rows = ["| variable | causality | unit | start | min..max | description |",

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from typing import Callable
 
+import numpy as np
+
 #: The paper's step levels U_1, U_2, U_3 [V].
 PAPER_LEVELS = (1.0, 2.5, 4.0)
 
@@ -42,7 +44,6 @@ def random_steps(seed: int = 0, duration: float = 12.0, hold=(0.15, 0.8)) -> Cal
     retracting (5.5 to 9.5 V) and centred, with reversals mid-stroke.  A richer
     excitation than the paper's multistep (breakaways, accelerations and decelerations
     in both directions) for identification and diagnosis."""
-    import numpy as np
     rng = np.random.default_rng(seed)
     times, levels, t = [], [], 0.0
     while t < duration:
@@ -62,7 +63,6 @@ def random_steps(seed: int = 0, duration: float = 12.0, hold=(0.15, 0.8)) -> Cal
 
 def held(segments) -> Callable[[float], dict]:
     """Commands held over consecutive segments: ``[(duration [s], u [V]), ...]``."""
-    import numpy as np
     starts = np.concatenate(([0.0], np.cumsum([d for d, _ in segments])[:-1]))
     levels = [float(u) for _, u in segments]
 

@@ -11,8 +11,11 @@ that status through the FMU's status shim (see ``boomfmi/fmubuild/status_shim.c`
 pythonfmu itself turns any Python exception into ``fmi2Fatal`` and frees the instance's
 Python object, which leaves the host nothing to recover.
 
-This module is bundled into each FMU with the physics, under a package name of that
-FMU's own; it uses relative imports only.
+An FMU's effect options (the catalogue's parameters of the effects that are its
+options) are declared by :func:`effect_options` from ``model/catalogue.py``, not here.
+
+This module is bundled into each FMU with the physics and the model, under a package
+name of that FMU's own; it uses relative imports only.
 """
 from __future__ import annotations
 
@@ -22,7 +25,8 @@ from typing import NamedTuple, Optional, Tuple
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
 from pythonfmu.enums import Fmi2Initial, Fmi2Status
 
-from .physics import reference_rig as rig
+from .model.catalogue import of_fmu
+from .physics import reference_rig
 from .physics.validation import ParameterError
 
 
@@ -30,7 +34,7 @@ class Variable(NamedTuple):
     """One FMU variable, as the FMU declares it.
 
     ``causality`` is ``"parameter"``, ``"input"`` or ``"output"``.  ``unit`` is an SI
-    unit string known to ``boomfmi.fmubuild.units`` (``"1"`` for dimensionless).
+    unit string known to ``boomfmi.units`` (``"1"`` for dimensionless).
     ``depends`` lists, for an output, the inputs it depends on directly within a
     communication point (``()`` for an output that is a state).
     """
@@ -60,26 +64,26 @@ def output(name, start, unit, description, depends=(), min=None, max=None, type=
 #: The reference rig's constants as FMU parameters, declared once for every FMU that
 #: needs them (``reference-rig.md``; SI, pressures absolute).
 RIG_PARAMETERS = {v.name: v for v in (
-    parameter("P_s", rig.P_s, "Pa", "supply pressure, absolute", min=0.0),
-    parameter("P_e", rig.P_e, "Pa", "exhaust pressure, absolute", min=0.0),
-    parameter("P_atm", rig.P_atm, "Pa", "atmospheric pressure (it acts on the rod)", min=0.0),
-    parameter("k", rig.k, "1", "ratio of specific heats of air", min=1.0),
-    parameter("R", rig.R, "J/(kg.K)", "specific gas constant of air", min=0.0),
-    parameter("T", rig.T, "K", "air temperature", min=0.0),
-    parameter("A_a", rig.A_a, "m2", "cap-side piston area", min=0.0),
-    parameter("A_b", rig.A_b, "m2", "rod-side annulus area", min=0.0),
-    parameter("L", rig.L, "m", "stroke", min=0.0),
-    parameter("V_a0", rig.V_a0, "m3", "dead volume of chamber A incl. port and hose", min=0.0),
-    parameter("V_b0", rig.V_b0, "m3", "dead volume of chamber B incl. port and hose", min=0.0),
-    parameter("K_v", rig.K_v, "N.s/m", "viscous friction coefficient", min=0.0),
-    parameter("F_s", rig.F_s, "N", "static friction force", min=0.0),
-    parameter("F_d", rig.F_d, "N", "Coulomb friction force", min=0.0),
-    parameter("F_L", rig.F_L, "N", "load force from the backhoe's weight, acting as F_L sin(phi)"),
-    parameter("M", rig.M, "kg", "moving mass reduced to the piston", min=0.0),
-    parameter("a", rig.a, "m", "boom geometry a (Eq. 10, 12)", min=0.0),
-    parameter("b", rig.b, "m", "boom geometry b (Eq. 10, 12)", min=0.0),
-    parameter("h", rig.h, "m", "boom geometry h (Eq. 10)", min=0.0),
-    parameter("l_min", rig.l_min, "m", "cylinder length at x = 0 (Eq. 11)", min=0.0),
+    parameter("P_s", reference_rig.P_s, "Pa", "supply pressure, absolute", min=0.0),
+    parameter("P_e", reference_rig.P_e, "Pa", "exhaust pressure, absolute", min=0.0),
+    parameter("P_atm", reference_rig.P_atm, "Pa", "atmospheric pressure (it acts on the rod)", min=0.0),
+    parameter("k", reference_rig.k, "1", "ratio of specific heats of air", min=1.0),
+    parameter("R", reference_rig.R, "J/(kg.K)", "specific gas constant of air", min=0.0),
+    parameter("T", reference_rig.T, "K", "air temperature", min=0.0),
+    parameter("A_a", reference_rig.A_a, "m2", "cap-side piston area", min=0.0),
+    parameter("A_b", reference_rig.A_b, "m2", "rod-side annulus area", min=0.0),
+    parameter("L", reference_rig.L, "m", "stroke", min=0.0),
+    parameter("V_a0", reference_rig.V_a0, "m3", "dead volume of chamber A incl. port and hose", min=0.0),
+    parameter("V_b0", reference_rig.V_b0, "m3", "dead volume of chamber B incl. port and hose", min=0.0),
+    parameter("K_v", reference_rig.K_v, "N.s/m", "viscous friction coefficient", min=0.0),
+    parameter("F_s", reference_rig.F_s, "N", "static friction force", min=0.0),
+    parameter("F_d", reference_rig.F_d, "N", "Coulomb friction force", min=0.0),
+    parameter("F_L", reference_rig.F_L, "N", "load force from the backhoe's weight, acting as F_L sin(phi)"),
+    parameter("M", reference_rig.M, "kg", "moving mass reduced to the piston", min=0.0),
+    parameter("a", reference_rig.a, "m", "boom geometry a (Eq. 10, 12)", min=0.0),
+    parameter("b", reference_rig.b, "m", "boom geometry b (Eq. 10, 12)", min=0.0),
+    parameter("h", reference_rig.h, "m", "boom geometry h (Eq. 10)", min=0.0),
+    parameter("l_min", reference_rig.l_min, "m", "cylinder length at x = 0 (Eq. 11)", min=0.0),
 )}
 LOAD = ("K_v", "F_s", "F_d", "F_L", "M")
 GEOMETRY = ("a", "b", "h", "l_min", "L")
@@ -89,6 +93,18 @@ CYLINDER = ("A_a", "A_b", "L", "V_a0", "V_b0")
 def rig_parameters(*names: str) -> Tuple[Variable, ...]:
     """The rows of :data:`RIG_PARAMETERS` for ``names``, in that order, each once."""
     return tuple(RIG_PARAMETERS[n] for n in dict.fromkeys(names))
+
+
+def effect_options(fmu: str) -> Tuple[Variable, ...]:
+    """The parameter rows of FMU ``fmu``'s effect options, from the catalogue of effects
+    (each off at its start value)."""
+    return tuple(parameter(p.option, p.start, p.unit, p.description, min=0.0, max=p.max)
+                 for e in of_fmu(fmu) for p in e.parameters)
+
+
+def option_values(slave, fmu: str) -> dict:
+    """``{option: value}`` of FMU ``fmu``'s effect options on the instance ``slave``."""
+    return {p.option: getattr(slave, p.option) for e in of_fmu(fmu) for p in e.parameters}
 
 
 _TYPES = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}

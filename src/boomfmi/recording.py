@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .physics import reference_rig as rig
+from .physics import reference_rig
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -62,7 +62,7 @@ class Recording:
 
     @property
     def P_atm(self) -> float:
-        return float(self.rig.get("P_atm", rig.P_atm))
+        return float(self.rig.get("P_atm", reference_rig.P_atm))
 
     def rig_tuple(self, cls):
         """A physics parameter set (``physics.Geometry``, ``Cylinder``, ``Gas``...) of
@@ -142,7 +142,7 @@ def parse_recording(path):
         for c in extra:
             extra[c].append(fields[index[c]])
 
-    P_atm = float(sidecar.get("rig", {}).get("P_atm", rig.P_atm))
+    P_atm = float(sidecar.get("rig", {}).get("P_atm", reference_rig.P_atm))
     t = values["t"]
     bad = np.flatnonzero(np.diff(t) <= 0)
     if bad.size:
@@ -150,7 +150,7 @@ def parse_recording(path):
         raise RecordingError(path, f"time does not increase ({float(t[i - 1])!r} s, then {float(t[i])!r} s)",
                              row=i + 2, column="t")
     u = values["u"]
-    bad = np.flatnonzero((u < rig.u_min) | (u > rig.u_max))
+    bad = np.flatnonzero((u < reference_rig.u_min) | (u > reference_rig.u_max))
     if bad.size:
         i = int(bad[0])
         raise RecordingError(path, f"command {float(u[i])!r} V lies outside 0 to 10 V", row=i + 2, column="u")

@@ -18,8 +18,9 @@ from pathlib import Path
 
 import pandas as pd
 
+from .compare import initial_state
 from .experiments import PROFILES, profile
-from .physics import reference_rig as rig
+from .physics import reference_rig
 from .recording import read_recording
 from .system.master import CoSimulation
 from .system.ssv import Parameter
@@ -49,7 +50,6 @@ def replay_parameters(recording) -> dict:
     """The teleoperation system's parameters for replaying ``recording`` through its
     hardware bridge: replay mode, the file, and the model starting where the machine
     starts (``boom_load.x0`` from the recording's first angle)."""
-    from .identify import initial_state
     x0, _, _ = initial_state(read_recording(recording))
     return {"hardware_bridge.mode": "replay", "hardware_bridge.recording": str(recording),
             "boom_load.x0": x0}
@@ -92,7 +92,7 @@ def bound_value(cosim, name: str) -> float:
     """The value the system binds to any component's parameter ``name`` (the first
     binding found), else the reference rig's."""
     return next((float(p.value) for n, p in cosim.structure.parameters.items()
-                 if n.rpartition(".")[2] == name), getattr(rig, name))
+                 if n.rpartition(".")[2] == name), getattr(reference_rig, name))
 
 
 def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,

@@ -1,11 +1,12 @@
 """Which unmodelled effect explains the gap, and by how much the model improves.
 
-For each candidate of ``effects.md`` (forms in ``physics/effects.py``; where a
-mechanism has two laws, as a seal's leak, both are fitted and the better kept): its few
-parameters are fitted on the fit recordings, with the baseline load parameters
-re-identified first (``identify.fit``), by output error of the whole model
-(``reference.simulate_reference`` with the effect on) on x, p_a and p_b, each residual
-normalised by its channel's range.  Each fitted candidate is then scored on the holdout
+For each candidate of ``effects.md`` (the catalogue, ``model/catalogue.py``, with its
+bounds; forms in ``physics/effects.py``; where a mechanism has two laws, as a seal's
+leak, both are fitted and the better kept): its few parameters are fitted on the fit
+recordings, with the baseline load parameters re-identified first (``identify.fit``),
+by output error of the whole model (the monolithic reference with the effect on,
+through ``compare.simulate_recording``) on x, p_a and p_b, each residual normalised by
+its channel's range.  Each fitted candidate is then scored on the holdout
 recordings, which are never fitted on: ``shrink = 1 - (error after) / (error before)``,
 errors summed over the three channels.  A second effect is fitted beside the best
 where the best leaves a gap.
@@ -25,29 +26,22 @@ from __future__ import annotations
 import itertools
 import math
 import os
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
-from ..identify import nrmse, recorded, simulate_recording
+from ..compare import CHANNELS, nrmse, recorded, shrink, simulate_recording
 from ..identify.preprocess import lowpass
+from ..model import EFFECTS, lagged
 
-CHANNELS = ("p_a", "p_b", "x")
-
-#: name -> [(parameter, lower, upper, log scale)]
-CANDIDATES = {
-    "valve_dynamics": [("tau", 2e-4, 0.05, True)],
-    "valve_deadband": [("width", 0.01, 1.5, False)],
-    "heat_transfer": [("h", 1.0, 2000.0, True)],
-    "piston_leakage": [("C", 1e-13, 5e-10, True)],
-    "stribeck_friction": [("v_s", 2e-4, 0.1, True)],
-    "end_cushioning": [("length", 2e-3, 0.02, False), ("A_n", 1e-8, 4e-6, True)],
-    "sensor_lag": [("tau", 2e-4, 0.03, True)],
-}
+#: name -> [(parameter, lower, upper, log scale)] of its first law, from the catalogue
+CANDIDATES = {name: [(p.name, p.lower, p.upper, p.log) for p in e.forms[0]] for name, e in EFFECTS.items()}
 #: effects with more than one law for their mechanism: each law is fitted and the one
 #: that fits the fit recordings best is kept (a seal leaks laminar or turbulent)
-FORMS = {"piston_leakage": [CANDIDATES["piston_leakage"], [("A", 1e-10, 2e-7, True)]]}
+FORMS = {name: [[(p.name, p.lower, p.upper, p.log) for p in form] for form in e.forms]
+         for name, e in EFFECTS.items() if len(e.forms) > 1}
 NOISE_FACTOR = 3.0
 ABS_FLOOR = 0.002
 MIN_SHRINK = 0.35
@@ -55,12 +49,6 @@ MIN_SHRINK_SECOND = 0.4     #: the share of the gap left by the best that a seco
 PAIR_TRIES = 3              #: the candidates tried as a second effect
 RTOL = 1e-5            #: the reference solver's tolerance when scoring
 FIT_RTOL = 1e-4        #: and while fitting (each fit runs the model a dozen times or more)
-
-
-def shrink(before: dict, after: dict) -> float:
-    """``1 - (error after) / (error before)``, the errors (NRMSE per channel) summed over
-    the channels: the share of the gap an effect removes."""
-    return 1.0 - sum(after.values()) / max(sum(before.values()), 1e-12)
 
 
 def errors(values: dict, effects: dict, rec, rtol: float = RTOL) -> dict:
@@ -71,9 +59,8 @@ def errors(values: dict, effects: dict, rec, rtol: float = RTOL) -> dict:
     only_lag = set(effects) == {"sensor_lag"}
     sim = _baseline(values, rec, rtol) if only_lag else simulate_recording(values, rec, effects=effects, rtol=rtol)
     if only_lag:
-        from ..reference import first_order_lag
         t = sim["time"].to_numpy()
-        sim = {c: first_order_lag(sim[c].to_numpy(), t, effects["sensor_lag"]["tau"]) for c in CHANNELS}
+        sim = {c: lagged(sim[c].to_numpy(), t, effects["sensor_lag"]["tau"]) for c in CHANNELS}
     return nrmse(sim, rec)
 
 
@@ -179,7 +166,6 @@ def _map(fn, jobs, workers):
     that the two-parameter fit does not start last); results in the jobs' order."""
     if workers > 1 and len(jobs) > 1:
         order = sorted(range(len(jobs)), key=lambda i: -_cost(jobs[i]))
-        from concurrent.futures import ProcessPoolExecutor
         with ProcessPoolExecutor(min(workers, len(jobs))) as pool:
             done = dict(zip(order, pool.map(fn, [jobs[i] for i in order])))
         return [done[i] for i in range(len(jobs))]

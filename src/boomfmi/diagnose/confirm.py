@@ -7,9 +7,9 @@ valve, cylinder and boom load, co-simulated at 1 ms by boomfmi's master over fmp
 with the re-identified baseline and then with the verdict's effects as FMU parameters,
 and its NRMSE and shrink are compared with the reference's.
 
-Sensor lag is the hardware bridge's option, on the measurement path: on the model's
-side it is the same first-order lag (``physics.effects.sensor_lag_step``) applied to the
-co-simulation's outputs.
+Each effect's FMU option comes from the catalogue (``model/catalogue.py``).  Sensor lag
+is the hardware bridge's option, on the measurement path: on the model's side it is the
+same first-order lag (``model.lagged``) applied to the co-simulation's outputs.
 """
 from __future__ import annotations
 
@@ -18,20 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from .. import physics as ph
-from ..identify import initial_state, nrmse
-from .attribute import shrink
+from ..compare import initial_state, nrmse, shrink
+from ..model import EFFECTS, fmu_variable, lagged
+from ..simulate import run_experiment
 
-#: (effect, candidate parameter) -> the FMU parameter that switches it on
-FMU_PARAMETERS = {
-    ("valve_dynamics", "tau"): "valve.tau_spool",
-    ("valve_deadband", "width"): "valve.deadband",
-    ("heat_transfer", "h"): "cylinder.h_wall",
-    ("piston_leakage", "C"): "cylinder.C_leak",
-    ("piston_leakage", "A"): "cylinder.A_leak",
-    ("stribeck_friction", "v_s"): "boom_load.v_s",
-    ("end_cushioning", "length"): "cylinder.l_cushion",
-    ("end_cushioning", "A_n"): "cylinder.A_cushion",
-}
 #: the FMUs and the reference agree when their shrinks differ by less than this
 AGREEMENT = 0.1
 
@@ -49,23 +39,20 @@ def fmu_parameters(values: dict, effects: dict, rec) -> dict:
     if "A_max" in values:
         params["valve.A_max"] = float(values["A_max"])
     for name, p in effects.items():
+        if EFFECTS[name].stage == "measurement":     # the bridge's: applied to the outputs
+            continue
         for k, v in p.items():
-            if (name, k) in FMU_PARAMETERS:
-                params[FMU_PARAMETERS[(name, k)]] = float(v)
-            elif name != "sensor_lag":
-                raise ValueError(f"no FMU parameter for {name}.{k}")
+            params[fmu_variable(name, k)] = float(v)
     return params
 
 
 def run_fmus(ssp, values: dict, effects: dict, rec) -> dict:
     """The SSP on the recording's command: x, p_a, p_b (gauge) on its samples."""
-    from ..reference import first_order_lag
-    from ..simulate import run_experiment
     out = run_experiment(ssp, str(rec.path), parameters=[fmu_parameters(values, effects, rec)])
     t = rec.data["t"].to_numpy(float)
     sim = {c: np.interp(t, out["t"].to_numpy(), out[c].to_numpy()) for c in ("x", "p_a", "p_b")}
     tau = effects.get("sensor_lag", {}).get("tau", 0.0)
-    return {c: first_order_lag(y, t, tau) for c, y in sim.items()} if tau > 0 else sim
+    return {c: lagged(y, t, tau) for c, y in sim.items()} if tau > 0 else sim
 
 
 def confirm(values: dict, effects: dict, rec, ssp=None) -> dict:

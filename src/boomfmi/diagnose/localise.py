@@ -33,12 +33,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import physics as ph
+from ..compare import CHANNELS
 from ..identify.fit import breakaways, simulate_load
 from ..identify.preprocess import Prepared
+from ..model import Boom, Model
 
 REGIMES = ("hold", "breakaway", "valve_step", "steady_motion", "stroke_end")
-CHANNELS = ("p_a", "p_b", "x")
 
 
 def regimes(p: Prepared, L: float) -> np.ndarray:
@@ -57,22 +57,19 @@ def regimes(p: Prepared, L: float) -> np.ndarray:
     return out
 
 
-def simulate_pneumatics(p: Prepared, valve: ph.Valve, cyl: ph.Cylinder, gas: ph.Gas):
+def simulate_pneumatics(p: Prepared, boom: Boom):
     """Valve and cylinder alone, driven by the recorded command and motion (measured
     signals in place of the boom's): the chamber pressures [Pa, absolute]."""
     n = len(p.t)
     pa, pb = np.empty(n), np.empty(n)
     pa[0], pb[0] = float(p.p_a_raw[0]), float(p.p_b_raw[0])
-    x = np.clip(p.x, 0.0, cyl.L)
+    x = np.clip(p.x, 0.0, boom.cylinder.L)
+    masses = list(boom.air_masses(pa[0], pb[0], float(x[0])))
     for k in range(n - 1):
-        dt = p.t[k + 1] - p.t[k]
-        u = float(p.u[k])
-        m_a, m_b = ph.chamber_flows(u, pa[k], pb[k], valve, gas)
-        s_a, s_b = ph.chamber_flow_slopes(u, pa[k], pb[k], valve, gas)
-        V_a0, V_b0 = ph.chamber_volumes(float(x[k]), cyl)
-        V_a1, V_b1 = ph.chamber_volumes(float(x[k + 1]), cyl)
-        pa[k + 1] = ph.chamber_pressure_step(pa[k], V_a0, V_a1, m_a, dt, gas, s_a)
-        pb[k + 1] = ph.chamber_pressure_step(pb[k], V_b0, V_b1, m_b, dt, gas, s_b)
+        x0 = float(x[k])
+        m_a, m_b, s_a, s_b = boom.chamber_inflows(boom.opening(float(p.u[k])), pa[k], pb[k], x0)
+        pa[k + 1], pb[k + 1] = boom.step_chambers(pa[k], pb[k], x0, float(x[k + 1]), m_a, m_b, s_a, s_b,
+                                                  p.t[k + 1] - p.t[k], masses)
     return pa, pb
 
 
@@ -105,21 +102,21 @@ def _windows(t, r2, mask, width=0.05, most=3):
     return out
 
 
-def localise(p: Prepared, model_sim, load: ph.Load, valve: ph.Valve = ph.Valve(),
-             cyl: ph.Cylinder = ph.Cylinder(), geom: ph.Geometry = ph.Geometry(),
-             gas: ph.Gas = ph.Gas(), P_atm: float = 101325.0, lag_max: float = 0.02) -> Localisation:
+def localise(p: Prepared, model_sim, model: Model, lag_max: float = 0.02) -> Localisation:
     """Break the whole model's residual on one recording down by channel, regime and
-    subsystem.  ``model_sim`` is the whole model driven by the recording's command
-    (columns x, p_a, p_b absolute), on the recording's samples."""
-    L = cyl.L
+    subsystem.  ``model_sim`` is the whole ``model`` (at the recording's rig, with the
+    identified load; ``compare.model_for``) driven by the recording's command (columns
+    x, p_a, p_b absolute), on the recording's samples."""
+    L = model.cylinder.L
     measured = {"x": p.x_raw, "p_a": p.p_a_raw, "p_b": p.p_b_raw}
     span = {c: max(float(np.ptp(measured[c])), 1e-9) for c in CHANNELS}
     whole = {c: (np.asarray(model_sim[c], float) - measured[c]) / span[c] for c in CHANNELS}
     nrmse = {c: float(np.sqrt(np.mean(whole[c] ** 2))) for c in CHANNELS}
 
     # parts of the model with measured signals in place of model signals
-    x_mech = simulate_load(p, load, cyl, geom, P_atm, 0, len(p.t), float(np.clip(p.x_raw[0], 0, L)))
-    pa_pn, pb_pn = simulate_pneumatics(p, valve, cyl, gas)
+    x_mech = simulate_load(p, model.load, model.cylinder, model.geometry, model.P_atm, 0, len(p.t),
+                           float(np.clip(p.x_raw[0], 0, L)))
+    pa_pn, pb_pn = simulate_pneumatics(p, Boom(model))
     part = {"x": (x_mech - measured["x"]) / span["x"],
             "p_a": (pa_pn - measured["p_a"]) / span["p_a"],
             "p_b": (pb_pn - measured["p_b"]) / span["p_b"]}

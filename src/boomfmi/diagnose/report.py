@@ -14,11 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import physics as ph
+from concurrent.futures import ProcessPoolExecutor
+
 from .._json import plain
-from ..identify import identify_recordings, nrmse, recorded, simulate_recording
+from ..compare import CHANNELS, model_for, nrmse, recorded, rig_model, shrink, simulate_recording
+from ..identify import identify_recordings
+from ..identify.preprocess import prepare
 from ..recording import read_recording
-from .attribute import CHANNELS, attribute, shrink
+from .attribute import attribute
 from .confirm import agreement, confirm
 from .localise import localise
 
@@ -57,17 +60,15 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
         best = att.candidates[0]
         verdict_fx = best.params if "+" in best.name else {best.name: best.params}
     # the FMUs confirm the result in another process while the report is drawn here
-    from concurrent.futures import ProcessPoolExecutor
     pool = ProcessPoolExecutor(1)
     confirming = pool.submit(confirm, values, verdict_fx, hold, ssp)
-    from ..identify.preprocess import prepare
-    prep = prepare(hold)
-    base_sim = simulate_recording(values, hold)
+    rig = rig_model(hold)            # the holdout's rig, from its sidecar, for all that follows
+    prep = prepare(hold, geometry=rig.geometry, P_atm=rig.P_atm)
+    base_sim = simulate_recording(values, hold, rig=rig)
     abs_sim = base_sim.copy()
-    abs_sim["p_a"] += hold.P_atm
-    abs_sim["p_b"] += hold.P_atm
-    load = ph.Load(**{k: values[k] for k in ph.Load._fields})
-    loc = localise(prep, abs_sim, load) if att.gap else None
+    abs_sim["p_a"] += rig.P_atm
+    abs_sim["p_b"] += rig.P_atm
+    loc = localise(prep, abs_sim, model_for(values, {}, rig)) if att.gap else None
     effects = [{"name": c.name, "params": c.params,
                 "nrmse_holdout_after": {k: round(v, 6) for k, v in c.holdout.items()},
                 "shrink": round(c.shrink, 4), "score": c.score} for c in att.candidates]
@@ -80,7 +81,7 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
            "where": loc.where if loc else [],
            "effects": effects,
            "verdict": att.verdict}
-    after_sim = simulate_recording(values, hold, effects=verdict_fx) if verdict_fx else None
+    after_sim = simulate_recording(values, hold, effects=verdict_fx, rig=rig) if verdict_fx else None
     try:
         doc["confirmation"] = confirming.result()
     except Exception as e:            # a failing confirmation is reported, not fatal

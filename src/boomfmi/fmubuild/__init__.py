@@ -2,8 +2,9 @@
 
 For each ``fmus/<name>/<name>_fmu.py`` this
 
-1. stages the script beside a private copy of ``boomfmi.physics`` and
-   ``boomfmi.fmislave`` in a package named ``boomfmi_<name>_lib``, which the script
+1. stages the script beside a private copy of ``boomfmi.physics``, ``boomfmi.model``
+   (the assembled model and the catalogue of effects, without the scipy reference
+   solver) and ``boomfmi.fmislave`` in a package named ``boomfmi_<name>_lib``, which the script
    imports.  Each FMU thus carries its own physics under a name no other FMU and no
    host-installed ``boomfmi`` can shadow (pythonfmu issue #228);
 2. builds the FMU with pythonfmu;
@@ -26,7 +27,7 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from .units import UNITS
+from ..units import UNITS
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[1]   # src/boomfmi
 SHIM_SOURCE = Path(__file__).with_name("status_shim.c")
@@ -54,9 +55,12 @@ def stage(fmu_dir: Path, staging: Path) -> Path:
     bundle = staging / bundle_name(name)
     bundle.mkdir()
     (bundle / "__init__.py").write_text(
-        f'"""The physics of the boomfmi {name} FMU: a private copy of boomfmi.physics."""\n')
+        f'"""The physics and model of the boomfmi {name} FMU: a private copy of boomfmi."""\n')
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
     shutil.copytree(PACKAGE_ROOT / "physics", bundle / "physics", ignore=ignore)
+    # the assembled model and its catalogue of effects; not the scipy reference solver
+    shutil.copytree(PACKAGE_ROOT / "model", bundle / "model",
+                    ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "reference.py"))
     shutil.copy2(PACKAGE_ROOT / "fmislave.py", bundle / "fmislave.py")
     # further boomfmi modules an FMU needs, one per line in fmus/<name>/bundle.txt
     extra = fmu_dir / "bundle.txt"
@@ -99,7 +103,7 @@ def complete_model_description(xml: bytes, variables, default_step: float = 1e-3
         type_node = sv.find(var.type)
         if var.type == "Real":
             if var.unit not in UNITS:
-                raise BuildError(f"variable {var.name}: unit {var.unit!r} is not in boomfmi.fmubuild.units")
+                raise BuildError(f"variable {var.name}: unit {var.unit!r} is not in boomfmi.units")
             type_node.set("unit", var.unit)
             used_units.add(var.unit)
         for bound in ("min", "max"):

@@ -13,13 +13,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..physics import reference_rig as rig
+from ..physics import reference_rig
+from ..system.instance import run_table
 
 
 def _valve() -> pd.DataFrame:
     u = np.array([5.0, 4.0, 2.5, 1.0, 0.0, 6.0, 7.5, 9.0, 10.0, 5.0, 3.0, 8.0])
-    p_a = np.array([1.0, 2.0, 3.0, 5.0, 7.0, 7.0, 4.0, 2.0, 1.2, 3.0, 6.9, 1.1]) * 1e5 + rig.P_atm
-    p_b = np.array([1.0, 6.0, 4.0, 0.5, 0.0, 0.2, 3.0, 5.5, 6.5, 3.0, 0.1, 6.9]) * 1e5 + rig.P_atm
+    p_a = np.array([1.0, 2.0, 3.0, 5.0, 7.0, 7.0, 4.0, 2.0, 1.2, 3.0, 6.9, 1.1]) * 1e5 + reference_rig.P_atm
+    p_b = np.array([1.0, 6.0, 4.0, 0.5, 0.0, 0.2, 3.0, 5.5, 6.5, 3.0, 0.1, 6.9]) * 1e5 + reference_rig.P_atm
     return pd.DataFrame({"time": np.arange(len(u)) * 1e-3, "u": u, "p_a": p_a, "p_b": p_b})
 
 
@@ -33,8 +34,8 @@ def _cylinder() -> pd.DataFrame:
 
 def _boom_load() -> pd.DataFrame:
     t = np.arange(0.0, 1.5001, 5e-3)
-    p_a = rig.P_atm + np.interp(t, [0, 0.2, 0.8, 0.9, 1.5], [0, 6e5, 6e5, 0, 0])
-    p_b = rig.P_atm + np.interp(t, [0, 0.8, 0.9, 1.0, 1.5], [0, 0, 6e5, 6e5, 6e5])
+    p_a = reference_rig.P_atm + np.interp(t, [0, 0.2, 0.8, 0.9, 1.5], [0, 6e5, 6e5, 0, 0])
+    p_b = reference_rig.P_atm + np.interp(t, [0, 0.8, 0.9, 1.0, 1.5], [0, 0, 6e5, 6e5, 6e5])
     f_ext = np.where((t > 0.4) & (t < 0.5), 150.0, 0.0)
     return pd.DataFrame({"time": t, "p_a": p_a, "p_b": p_b, "f_ext": f_ext})
 
@@ -61,7 +62,6 @@ def paths(fmu_dir: Path) -> tuple[Path, Path]:
 
 def write_references(fmu_dir: Path, fmu_path: Path) -> Path:
     """Write ``<name>_in.csv`` and ``<name>_ref.csv`` next to the FMU's script."""
-    from ..system.instance import run_table
     name = Path(fmu_dir).name
     in_csv, ref_csv = paths(fmu_dir)
     table = INPUTS[name]()

@@ -13,6 +13,7 @@ parameter set named ``<set>``.
 """
 from __future__ import annotations
 
+import tempfile
 import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
@@ -50,7 +51,6 @@ def component_parameter_set(source_dir: Path, file_name: str, component: str) ->
     params = read_ssv(whole.read_bytes(), str(whole))
     prefix = component + "."
     part = {n[len(prefix):]: (p.value, p.unit) for n, p in params.items() if n.startswith(prefix)}
-    import tempfile
     with tempfile.TemporaryDirectory() as tmp:
         out = write_ssv(Path(tmp) / file_name, set_name, part,
                         f"{component}'s part of {whole.name}")

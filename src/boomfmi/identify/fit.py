@@ -32,13 +32,16 @@ identify it.
 from __future__ import annotations
 
 import math
+import multiprocessing
+import os
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 
 from .. import physics as ph
-from ..physics import reference_rig as rig
+from ..physics import reference_rig
 from .preprocess import Prepared
 
 PARAMS = ("K_v", "F_s", "F_d", "F_L", "M")
@@ -234,10 +237,8 @@ class _Parts:
     as run: run(theta) -> [part(0, theta), ...]``."""
 
     def __init__(self, part, n: int):
-        import multiprocessing
         self.part, self.n, self.pool = part, n, None
         if n > 1 and "fork" in multiprocessing.get_all_start_methods():
-            from concurrent.futures import ProcessPoolExecutor
             _SCAN["part"] = part
             self.pool = ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("fork"))
 
@@ -256,7 +257,6 @@ class _Parts:
 
 
 def _workers(n_items: int) -> int:
-    import os
     return max(1, min(os.cpu_count() or 1, n_items))
 
 
@@ -391,7 +391,7 @@ def fit_A_max(preps: list[Prepared], cyl: ph.Cylinder, valve: ph.Valve, gas: ph.
 
 
 def identify(preps: list[Prepared], cyl: ph.Cylinder = ph.Cylinder(), geom: ph.Geometry = ph.Geometry(),
-             P_atm: float = rig.P_atm, refine_all: bool = True, with_A_max: bool = False,
+             P_atm: float = reference_rig.P_atm, refine_all: bool = True, with_A_max: bool = False,
              valve: ph.Valve = ph.Valve(), gas: ph.Gas = ph.Gas()) -> FitResult:
     """The sound method on prepared recordings; see the module's docstring."""
     L = cyl.L

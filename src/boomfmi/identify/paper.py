@@ -27,7 +27,7 @@ import math
 import numpy as np
 
 from .. import physics as ph
-from ..physics import reference_rig as rig
+from ..physics import reference_rig
 from .fit import Estimate, FitResult, UNITS, breakaways
 from .preprocess import Prepared
 
@@ -81,7 +81,7 @@ def _constant_acceleration_states(preps, F_L, cyl, P_atm, L, window=0.03, margin
     return states
 
 
-def identify_paper(preps: list[Prepared], cyl: ph.Cylinder = ph.Cylinder(), P_atm: float = rig.P_atm,
+def identify_paper(preps: list[Prepared], cyl: ph.Cylinder = ph.Cylinder(), P_atm: float = reference_rig.P_atm,
                    eq13: str = "printed") -> FitResult:
     """The paper's method on prepared recordings of its multistep experiment."""
     if eq13 not in ("printed", "derived"):

@@ -52,9 +52,10 @@ class Prepared:
         return 1.0 / self.fs
 
 
-def prepare(rec: Recording, cutoff: float = CUTOFF, geometry: ph.Geometry = ph.Geometry(),
+def prepare(rec: Recording, cutoff: float = CUTOFF, geometry: ph.Geometry | None = None,
             P_atm: float | None = None) -> Prepared:
-    """Filter a recording and derive x, v, a and phi."""
+    """Filter a recording and derive x, v, a and phi, at the recording's rig (its
+    sidecar's geometry and P_atm) unless ``geometry`` or ``P_atm`` are given."""
     d = rec.data
     t = d["t"].to_numpy(dtype=float)
     steps = np.diff(t)
@@ -63,6 +64,7 @@ def prepare(rec: Recording, cutoff: float = CUTOFF, geometry: ph.Geometry = ph.G
         raise ValueError(f"{rec.path}: samples are not evenly spaced (median step {1e3 / fs:.3f} ms); "
                          f"resample before identification")
     P_atm = rec.P_atm if P_atm is None else P_atm
+    geometry = rec.rig_tuple(ph.Geometry) if geometry is None else geometry
     p_a_raw = d["p_a"].to_numpy(dtype=float) + P_atm
     p_b_raw = d["p_b"].to_numpy(dtype=float) + P_atm
     x_raw = ph.x_from_alpha(d["alpha"].to_numpy(dtype=float), geometry)

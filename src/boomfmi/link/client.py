@@ -12,7 +12,7 @@ import select
 import socket
 import time
 
-from .protocol import (BadMac, LinkError, Malformed, Sample, SequenceGuard, decode,
+from .protocol import (BadMac, LinkError, Malformed, SampleDatagram, SequenceGuard, decode,
                        encode_command, encode_status)
 
 
@@ -57,7 +57,7 @@ class RigClient:
         except OSError:
             pass            # a refused or unreachable rig shows as a missing answer
 
-    def exchange(self, u: float | None, t: float, dt: float = 1e-3) -> Sample | None:
+    def exchange(self, u: float | None, t: float, dt: float = 1e-3) -> SampleDatagram | None:
         """Send a command (``u`` for the step from ``t`` to ``t + dt``) or, with
         ``u=None``, a status request; return the rig's answer, or None when none arrives
         within the timeout."""
@@ -87,7 +87,7 @@ class RigClient:
             except BadMac:
                 self.dropped["auth"] += 1
                 continue
-            if not isinstance(msg, Sample):
+            if not isinstance(msg, SampleDatagram):
                 self.dropped["malformed"] += 1
                 continue
             if msg.echo != seq:

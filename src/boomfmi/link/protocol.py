@@ -72,7 +72,9 @@ class StatusRequest(NamedTuple):
     t: float
 
 
-class Sample(NamedTuple):
+class SampleDatagram(NamedTuple):
+    """A sample as the link carries it (the rig's ``rig.plant.Sample`` with the link's
+    sequence number, flags, the command it echoes and the rejected-datagram count)."""
     seq: int
     flags: int
     t: float
@@ -139,7 +141,7 @@ def encode_sample(seq: int, flags: int, t: float, u_applied: float, p_a: float, 
 
 
 def decode(datagram: bytes, key: bytes):
-    """A :class:`Command`, :class:`StatusRequest` or :class:`Sample`; raises
+    """A :class:`Command`, :class:`StatusRequest` or :class:`SampleDatagram`; raises
     :class:`Malformed` or :class:`BadMac`."""
     if len(datagram) != DATAGRAM_SIZE:
         raise Malformed(f"{len(datagram)} bytes, not {DATAGRAM_SIZE}")
@@ -158,7 +160,7 @@ def decode(datagram: bytes, key: bytes):
         return StatusRequest(seq, t)
     if kind == SAMPLE:
         f = _SAMPLE.unpack_from(payload)
-        return Sample(seq, flags, *f[5:])
+        return SampleDatagram(seq, flags, *f[5:])
     raise Malformed(f"unknown kind {kind}")
 
 

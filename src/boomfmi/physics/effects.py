@@ -2,33 +2,12 @@
 
 Each is the simplest physical form of its mechanism with one or two parameters, meant
 to be fitted to recordings and switched on as an option of the FMU it belongs to.
-They differ on purpose from the virtual rig's forms (``rig_truth``): a diagnosis that
-only recognised its own simulator would be worth nothing on a real machine.
-
-============================ ======== =========================================== ========
-effect (FMU)                 param    form                                        off at
-============================ ======== =========================================== ========
-valve_dynamics (valve)       tau      first-order lag of the spool:               tau = 0
-                                      dy/dt = (u - y) / tau
-valve_deadband (valve)       width    no opening for |u - 5| < width; linear      width = 0
-                                      beyond, full opening still at 0 and 10 V
-heat_transfer (cylinder)     h        the air exchanges heat with the chamber's   h = 0
-                                      wall: the pressure relaxes towards the
-                                      isothermal m R T_w / V with time constant
-                                      m c_v / (h A_wall), A_wall the wall the air
-                                      touches (end faces and barrel)
-piston_leakage (cylinder)    C or A   a leak A -> B across the seal, by one of    C = A = 0
-                                      two laws, whichever fits: laminar
-                                      C (p_a - p_b), or turbulent through a gap
-                                      of area A (the orifice law, Eq. 1)
-stribeck_friction (boom)     v_s      Coulomb level F_d + (F_s - F_d) e^(-|v|/v_s) v_s = 0
-end_cushioning (cylinder)    l_c, A_n within l_c of a chamber's end, its      l_c = 0
-                                      outflow passes the cushion needle (area
-                                      A_n, to the exhaust) in series with the
-                                      valve: 1/mdot^2 = 1/mdot_v^2 + 1/mdot_n^2;
-                                      inflow passes freely (check valve)
-sensor_lag (bridge)          tau      first-order lag of every measured channel   tau = 0
-============================ ======== =========================================== ========
+Which effect each function serves, its parameters, their units and bounds, and the FMU
+option that switches it on are listed once, in the catalogue
+(``boomfmi/model/catalogue.py``); the assembled model (``boomfmi/model/boom.py``) calls
+these functions.  They differ on purpose from the virtual rig's forms
+(``boomfmi/rig/truth.py``): a diagnosis that only recognised its own simulator would be
+worth nothing on a real machine.
 """
 from __future__ import annotations
 

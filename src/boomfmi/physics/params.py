@@ -8,51 +8,51 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from . import reference_rig as rig
+from . import reference_rig
 from .validation import (ParameterError, require_finite, require_non_negative,
                          require_positive)
 
 
 class Gas(NamedTuple):
     """Thermodynamic constants of the air (Eq. 1, 4 to 7)."""
-    k: float = rig.k      #: ratio of specific heats [1]
-    R: float = rig.R      #: specific gas constant [J/(kg K)]
-    T: float = rig.T      #: temperature [K]
+    k: float = reference_rig.k      #: ratio of specific heats [1]
+    R: float = reference_rig.R      #: specific gas constant [J/(kg K)]
+    T: float = reference_rig.T      #: temperature [K]
 
 
 class Valve(NamedTuple):
     """The proportional valve (Eq. 1 and the reference rig's A(u) and routing)."""
-    A_max: float = rig.A_max        #: orifice area at full opening [m^2]
-    P_s: float = rig.P_s            #: supply pressure, absolute [Pa]
-    P_e: float = rig.P_e            #: exhaust pressure, absolute [Pa]
-    u_centre: float = rig.u_centre  #: command that closes every port [V]
+    A_max: float = reference_rig.A_max        #: orifice area at full opening [m^2]
+    P_s: float = reference_rig.P_s            #: supply pressure, absolute [Pa]
+    P_e: float = reference_rig.P_e            #: exhaust pressure, absolute [Pa]
+    u_centre: float = reference_rig.u_centre  #: command that closes every port [V]
     u_span: float = 5.0             #: command offset from centre for full opening [V]
 
 
 class Cylinder(NamedTuple):
     """The double-acting cylinder (Eq. 6, 7)."""
-    A_a: float = rig.A_a    #: cap-side piston area [m^2]
-    A_b: float = rig.A_b    #: rod-side annulus area [m^2]
-    L: float = rig.L        #: stroke [m]
-    V_a0: float = rig.V_a0  #: dead volume of chamber A [m^3]
-    V_b0: float = rig.V_b0  #: dead volume of chamber B [m^3]
+    A_a: float = reference_rig.A_a    #: cap-side piston area [m^2]
+    A_b: float = reference_rig.A_b    #: rod-side annulus area [m^2]
+    L: float = reference_rig.L        #: stroke [m]
+    V_a0: float = reference_rig.V_a0  #: dead volume of chamber A [m^3]
+    V_b0: float = reference_rig.V_b0  #: dead volume of chamber B [m^3]
 
 
 class Geometry(NamedTuple):
     """Boom linkage of Eq. 10 to 12 [m]."""
-    a: float = rig.a
-    b: float = rig.b
-    h: float = rig.h
-    l_min: float = rig.l_min
+    a: float = reference_rig.a
+    b: float = reference_rig.b
+    h: float = reference_rig.h
+    l_min: float = reference_rig.l_min
 
 
 class Load(NamedTuple):
     """Boom load and friction of Eq. 8, 9."""
-    K_v: float = rig.K_v  #: viscous friction coefficient [N s/m]
-    F_s: float = rig.F_s  #: static friction force [N]
-    F_d: float = rig.F_d  #: Coulomb friction force [N]
-    F_L: float = rig.F_L  #: load force from the backhoe's weight [N]
-    M: float = rig.M      #: moving mass reduced to the piston [kg]
+    K_v: float = reference_rig.K_v  #: viscous friction coefficient [N s/m]
+    F_s: float = reference_rig.F_s  #: static friction force [N]
+    F_d: float = reference_rig.F_d  #: Coulomb friction force [N]
+    F_L: float = reference_rig.F_L  #: load force from the backhoe's weight [N]
+    M: float = reference_rig.M      #: moving mass reduced to the piston [kg]
 
 
 def check_gas(gas: Gas) -> None:

@@ -11,7 +11,7 @@ import shutil
 from pathlib import Path
 from typing import Iterable, Mapping
 
-from fmpy import extract, read_model_description
+from fmpy import calloc, extract, free, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
@@ -41,7 +41,6 @@ class FmuInstance:
     """
 
     def __init__(self, path, name: str | None = None, debug_logging: bool = False):
-        from fmpy import calloc, free
         self.path = Path(path)
         if not self.path.is_file():
             raise FileNotFoundError(f"{self.path}: no such FMU")

@@ -12,6 +12,8 @@ from pathlib import Path
 from typing import NamedTuple
 from xml.etree import ElementTree as ET
 
+from ..units import UNITS
+
 NS = {"ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
       "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
       "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription"}
@@ -81,7 +83,6 @@ def write_ssv(path, name: str, parameters: dict[str, tuple[object, str | None]],
               description: str | None = None) -> Path:
     """Write a parameter set ``{hierarchical name: (value, unit)}``: a float is a Real
     (with its unit), a bool a Boolean, an int an Integer, a str a String."""
-    from ..fmubuild.units import UNITS
     ET.register_namespace("ssv", NS["ssv"])
     ET.register_namespace("ssc", NS["ssc"])
     root = ET.Element(f"{{{NS['ssv']}}}ParameterSet", version="1.0", name=name)

@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 from ..physics import Cylinder, Geometry, linkage_points, x_from_alpha
-from ..physics import reference_rig as rig
+from ..physics import reference_rig
 from ..recording import read_recording
 
 #: The boom's drawn length from O to the bucket's tip, as a multiple of b.  The paper
@@ -39,14 +39,14 @@ POSTURE = ("alpha", "x", "p_a", "p_b")
 FORCES = ("f_est", "f_ext", "f_reflect")
 
 
-def scene(geom: Geometry = Geometry(), L: float = rig.L) -> dict:
+def scene(geom: Geometry = Geometry(), L: float = reference_rig.L) -> dict:
     """The fixed parts of the drawing [m]: the pivots O and C, the stroke, the
     cylinder's body and rod lengths and bore, the bucket tip's distance from O."""
     C, _ = linkage_points(0.0, geom)
     return {"O": [0.0, 0.0], "C": [C[0], C[1]], "a": geom.a, "b": geom.b, "h": geom.h,
             "l_min": geom.l_min, "L": L, "r_tip": TIP_OVER_B * geom.b,
             "body_length": geom.l_min - 0.02, "rod_length": L + 0.03,
-            "bore": rig.bore, "rod": rig.rod}
+            "bore": reference_rig.bore, "rod": reference_rig.rod}
 
 
 def _tip(R):

@@ -38,8 +38,8 @@ from aiohttp import WSMsgType, web
 
 from ..link.client import parse_address
 from ..physics import Geometry
-from ..physics import reference_rig as rig
-from .frames import Run, live_frame, scene
+from ..physics import reference_rig
+from .frames import Run, live_frame, load_run, scene
 
 WEB = Path(__file__).resolve().parent / "web"
 MODULES = WEB / "node_modules"
@@ -226,7 +226,7 @@ class LiveHub(asyncio.DatagramProtocol):
 
     def hello(self) -> str:
         last = self.history[-1] if self.history else None
-        return _hello("live", self.source, last["t"] if last else 0.0, None, self.geom, rig.L,
+        return _hello("live", self.source, last["t"] if last else 0.0, None, self.geom, reference_rig.L,
                       bool(last and last["model"] is not None), bool(last and last["f_ext"] is not None))
 
 
@@ -305,7 +305,6 @@ async def _serve(app: web.Application, host: str, port: int, hub: LiveHub | None
 def serve(replay=None, live: str | None = None, host: str = "127.0.0.1", port: int = 0, ready=None) -> None:
     """Serve the view of a run file (``replay``) or of a live feed (``live``,
     udp://HOST:PORT to listen on) until SIGINT or SIGTERM; ``ready(url)`` once serving."""
-    from .frames import load_run
     if (replay is None) == (live is None):
         raise ViewError("give a run to replay or a live address, not both or neither")
     run = load_run(replay) if replay is not None else None

@@ -1,0 +1,97 @@
+"""Model against recording: the one place where the two are compared.
+
+A recording comes from a rig whose values its sidecar may set (``recording-format.md``:
+the sidecar's ``rig`` values override the reference rig's).  :func:`rig_model` builds
+that rig's :class:`~boomfmi.model.Model` once; :func:`model_for` puts identified load
+values and candidate effects on it; :func:`initial_state` says where the recording
+starts; :func:`simulate_recording` runs the monolithic reference on the recording's
+command and samples; :func:`recorded` and :func:`nrmse` compare channel by channel.
+Identification, diagnosis and ``boomfmi simulate`` all compare through these.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import physics as ph
+from .model import Model
+from .model.reference import simulate_reference
+from .recording import Recording
+
+#: The channels on which model and recording are compared: chamber pressures (gauge)
+#: and the piston position from the angle (Eq. 12).
+CHANNELS = ("p_a", "p_b", "x")
+
+
+def rig_model(rec: Recording) -> Model:
+    """The model at the recording's rig: the reference rig's values with the sidecar's
+    overrides (valve, gas, cylinder, geometry, load, P_atm), no effects."""
+    return Model(valve=rec.rig_tuple(ph.Valve), gas=rec.rig_tuple(ph.Gas), cylinder=rec.rig_tuple(ph.Cylinder),
+                 geometry=rec.rig_tuple(ph.Geometry), load=rec.rig_tuple(ph.Load), P_atm=rec.P_atm)
+
+
+def model_for(values: dict, effects: dict | None = None, rig: Model | None = None) -> Model:
+    """``rig`` (a :func:`rig_model`; default the reference rig) with the identified
+    ``values`` in place of its load (and ``A_max``) and the candidate ``effects`` on."""
+    rig = rig if rig is not None else Model()
+    load = rig.load._replace(**{k: values[k] for k in ph.Load._fields if k in values and math.isfinite(values[k])})
+    valve = rig.valve._replace(A_max=values["A_max"]) if "A_max" in values else rig.valve
+    return Model(valve=valve, gas=rig.gas, cylinder=rig.cylinder, geometry=rig.geometry, load=load,
+                 P_atm=rig.P_atm, effects=dict(effects or {}))
+
+
+def initial_state(rec: Recording, rig: Model | None = None) -> tuple[float, float, float]:
+    """Where a recording starts: the piston position x0 [m] (Eq. 12 from the first
+    angle, within the stroke, at the recording's rig) and the absolute chamber pressures
+    p_a0, p_b0 [Pa]."""
+    rig = rig if rig is not None else rig_model(rec)
+    alpha0 = float(rec.data["alpha"].iloc[0])
+    x0 = float(np.clip(ph.x_from_alpha(alpha0, rig.geometry), 0.0, rig.cylinder.L))
+    return (x0, float(rec.data["p_a"].iloc[0]) + rig.P_atm, float(rec.data["p_b"].iloc[0]) + rig.P_atm)
+
+
+def simulate_recording(values: dict, rec: Recording, effects: dict | None = None, rtol: float = 1e-9,
+                       rig: Model | None = None):
+    """The model with ``values`` (and ``effects``) at the recording's rig, driven by its
+    command (u held between samples), on its times; pressures gauge like the recording.
+    ``rig``: the recording's :func:`rig_model`, where the caller has it already."""
+    rig = rig if rig is not None else rig_model(rec)
+    t = rec.data["t"].to_numpy(dtype=float)
+    u = rec.data["u"].to_numpy(dtype=float)
+    changes = t[1:][np.diff(u) != 0]
+
+    def command(s):
+        i = max(0, int(np.searchsorted(t, s + 1e-9, side="right")) - 1)
+        return {"u": float(u[i])}
+    model = model_for(values, effects, rig)
+    model.x0, model.p_a0, model.p_b0 = initial_state(rec, rig)
+    sim = simulate_reference(model, command, float(t[-1]), times=t - t[0], breakpoints=changes - t[0],
+                             rtol=rtol)
+    sim["p_a"] -= rig.P_atm
+    sim["p_b"] -= rig.P_atm
+    return sim
+
+
+def recorded(rec: Recording, rig: Model | None = None) -> dict:
+    """A recording's x (Eq. 12 from its alpha, at its rig's geometry), p_a and p_b
+    (gauge) as arrays."""
+    rig = rig if rig is not None else rig_model(rec)
+    return {"x": ph.x_from_alpha(rec.data["alpha"].to_numpy(dtype=float), rig.geometry),
+            "p_a": rec.data["p_a"].to_numpy(float), "p_b": rec.data["p_b"].to_numpy(float)}
+
+
+def nrmse(sim, rec: Recording, rig: Model | None = None) -> dict:
+    """NRMSE of x, p_a, p_b: RMS error over the recording's range.  ``sim`` maps each
+    channel to values on the recording's samples (gauge pressures)."""
+    out = {}
+    for name, measured in recorded(rec, rig).items():
+        span = float(np.ptp(measured)) or 1.0
+        out[name] = float(np.sqrt(np.mean((np.asarray(sim[name], float) - measured) ** 2)) / span)
+    return out
+
+
+def shrink(before: dict, after: dict) -> float:
+    """``1 - (error after) / (error before)``, the errors (NRMSE per channel) summed over
+    the channels: the share of the gap an effect removes."""
+    return 1.0 - sum(after.values()) / max(sum(before.values()), 1e-12)

@@ -1,0 +1,176 @@
+"""The catalogue of unmodelled effects: one entry per name of ``shared/spec/effects.md``.
+
+Each entry says what the effect is in the model: the FMU whose option it is, the stage
+of the boom model it acts on, its laws (``forms``: a mechanism with two laws, such as a
+seal that leaks laminar or turbulent, has two, and diagnosis fits both) and for every
+parameter its unit, fitting bounds and scale, the FMU variable it maps to, its start
+value there and a description.  The assembled model (:mod:`.boom`), the FMUs'
+variable tables (``fmislave.effect_options``), diagnosis's candidates and its
+confirmation through the FMUs all read this table; nothing else lists the effects.
+
+Stages (where in the model an effect acts; :mod:`.boom` applies them in this order):
+
+=============== ============================================================== =========
+stage           what the effect's function maps                                stateful
+=============== ============================================================== =========
+``spool``       the command to the spool's position (a lag)                    yes
+``command``     the spool's position to the command the orifices see            no
+``port``        a chamber's flow through its valve port (and its slope)          no
+``seal``        the chambers' inflows, with flows between them                 no
+``heat``        the chambers' pressures, exchanging heat with the wall          yes
+``friction``    the load parameters at the piston's speed and pressures          no
+``measurement`` what the sensors report of the physics                          yes
+=============== ============================================================== =========
+
+A stateless stage's ``apply`` is called by the model with every effect of that stage
+that is on, so a new effect there is its physics function, its entry here and its FMU
+option.  A stateful stage (a new state of the model) needs the model's integrators
+too.
+"""
+from __future__ import annotations
+
+from typing import Callable, NamedTuple, Optional, Tuple
+
+from ..physics import effects as fx
+
+#: the stages of the boom model, in the order it applies them
+STAGES = ("spool", "command", "port", "seal", "heat", "friction", "measurement")
+
+
+class Parameter(NamedTuple):
+    """One parameter of an effect."""
+    name: str           #: the key in ``Model.effects[effect]``
+    unit: str           #: SI unit (``fmubuild``'s unit names)
+    lower: float        #: fitting bounds
+    upper: float
+    log: bool           #: fitted on a log scale
+    option: str         #: the FMU variable (of the effect's FMU) that sets it
+    description: str    #: what it is, for the FMU's variable and the docs
+    start: float = 0.0  #: the FMU variable's start value
+    switch: bool = True  #: a value > 0 switches the effect on (False: a setting only)
+    max: Optional[float] = None  #: the FMU variable's declared maximum
+
+
+class Effect(NamedTuple):
+    """One unmodelled effect of ``effects.md``."""
+    name: str
+    fmu: str                                #: the FMU whose option it is
+    stage: str                              #: see the module's table
+    forms: Tuple[Tuple[Parameter, ...], ...]  #: the laws, each with its parameters
+    summary: str
+    apply: Optional[Callable] = None        #: a stateless stage's function, see :mod:`.boom`
+
+    @property
+    def parameters(self) -> Tuple[Parameter, ...]:
+        """Every parameter over all forms, each once, in order."""
+        seen = {}
+        for form in self.forms:
+            for p in form:
+                seen.setdefault(p.name, p)
+        return tuple(seen.values())
+
+    def is_on(self, params: dict) -> bool:
+        """Whether ``params`` switch the effect on (a switching parameter > 0)."""
+        return any(params.get(p.name, 0.0) > 0.0 for p in self.parameters if p.switch)
+
+
+# ------------------------------------------------------------ stateless stages' functions
+# command: (command [V], params, model) -> command [V]
+def _deadband(u, q, model):
+    return fx.deadband_command(u, q["width"], model.valve.u_centre, model.valve.u_span)
+
+
+# port, seal: (mdot_a, mdot_b, s_a, s_b, p_a, p_b, x, params, model) -> (mdot_a, mdot_b, s_a, s_b);
+# s_a, s_b (the flows' slopes in their chamber's pressure) may be None: not wanted
+def _cushion(m_a, m_b, s_a, s_b, p_a, p_b, x, q, model):
+    l_c, A_n, P_e, gas, L = q["length"], q["A_n"], model.valve.P_e, model.gas, model.cylinder.L
+    if s_a is not None:
+        s_a = fx.cushion_outflow_slope(m_a, s_a, p_a, x, l_c, A_n, P_e, gas)
+        s_b = fx.cushion_outflow_slope(m_b, s_b, p_b, L - x, l_c, A_n, P_e, gas)
+    return (fx.cushion_outflow(m_a, p_a, x, l_c, A_n, P_e, gas),
+            fx.cushion_outflow(m_b, p_b, L - x, l_c, A_n, P_e, gas), s_a, s_b)
+
+
+def _leak(m_a, m_b, s_a, s_b, p_a, p_b, x, q, model):
+    C, A = q.get("C", 0.0), q.get("A", 0.0)
+    leak = C * (p_a - p_b) + fx.leakage_orifice_flow(p_a, p_b, A, model.gas)
+    if s_a is not None:
+        g_a, g_b = fx.leakage_orifice_slopes(p_a, p_b, A, model.gas)
+        s_a, s_b = s_a - C + g_a, s_b - C + g_b
+    return m_a - leak, m_b + leak, s_a, s_b
+
+
+# friction: (load, v, p_a, p_b, params) -> load
+def _stribeck(load, v, p_a, p_b, q):
+    return fx.stribeck_load(load, v, q["v_s"])
+
+
+def _p(name, unit, lower, upper, log, option, description, **kw):
+    return Parameter(name, unit, lower, upper, log, option, description, **kw)
+
+
+#: name -> :class:`Effect`, in the order of ``effects.md``
+EFFECTS = {e.name: e for e in (
+    Effect("valve_dynamics", "valve", "spool",
+           ((_p("tau", "s", 2e-4, 0.05, True, "tau_spool",
+                "valve_dynamics: time constant of the spool's first-order lag; 0: off"),),),
+           "first-order lag of the spool: dy/dt = (u - y) / tau"),
+    Effect("valve_deadband", "valve", "command",
+           ((_p("width", "V", 0.01, 1.5, False, "deadband",
+                "valve_deadband: half-width of the closed band around 5 V; 0: off", max=4.9),),),
+           "no opening for |u - 5| < width; linear beyond, full opening still at 0 and 10 V",
+           _deadband),
+    Effect("heat_transfer", "cylinder", "heat",
+           ((_p("h", "W/(m2.K)", 1.0, 2000.0, True, "h_wall",
+                "heat_transfer: heat-transfer coefficient between the air and the chamber wall; 0: off"),),),
+           "the pressure relaxes towards the isothermal m R T_w / V with time constant "
+           "m c_v / (h A_wall), A_wall the wall the air touches (end faces and barrel)"),
+    Effect("piston_leakage", "cylinder", "seal",
+           ((_p("C", "kg/(s.Pa)", 1e-13, 5e-10, True, "C_leak",
+                "piston_leakage: laminar conductance of the piston seal, A to B; 0: off"),),
+            (_p("A", "m2", 1e-10, 2e-7, True, "A_leak",
+                "piston_leakage: area of a turbulent leak gap across the piston seal (orifice law); 0: off"),)),
+           "a leak A -> B across the seal: laminar C (p_a - p_b), or turbulent through a gap "
+           "of area A (the orifice law, Eq. 1), whichever fits", _leak),
+    Effect("stribeck_friction", "boom_load", "friction",
+           ((_p("v_s", "m/s", 2e-4, 0.1, True, "v_s",
+                "stribeck_friction: Stribeck velocity of exp(-|v|/v_s); 0: off (the paper's step)"),),),
+           "Coulomb level F_d + (F_s - F_d) exp(-|v| / v_s)", _stribeck),
+    Effect("end_cushioning", "cylinder", "port",
+           ((_p("length", "m", 2e-3, 0.02, False, "l_cushion",
+                "end_cushioning: cushion length at each end of stroke; 0: off"),
+             _p("A_n", "m2", 1e-8, 4e-6, True, "A_cushion",
+                "end_cushioning: cushion needle's orifice area", start=1e-7, switch=False)),),
+           "within length of a chamber's end, its outflow also passes the cushion needle "
+           "(area A_n, to the exhaust) in series with the valve; inflow passes freely",
+           _cushion),
+    Effect("sensor_lag", "hardware_bridge", "measurement",
+           ((_p("tau", "s", 2e-4, 0.03, True, "tau_sensor",
+                "sensor_lag: time constant of a first-order lag on every measured channel; 0: off"),),),
+           "first-order lag of every measured channel"),
+)}
+
+#: the effects.md names that have no entry yet, with why (checked by the tests)
+PENDING = {"pressure_friction": "issue 18: its form is chosen on the real friction measurements"}
+
+
+def of_fmu(fmu: str) -> Tuple[Effect, ...]:
+    """The effects that are options of FMU ``fmu``."""
+    return tuple(e for e in EFFECTS.values() if e.fmu == fmu)
+
+
+def fmu_variable(effect: str, parameter: str) -> str:
+    """The SSP name (``valve.tau_spool``) of an effect parameter's FMU variable."""
+    e = EFFECTS[effect]
+    return f"{e.fmu}.{next(p for p in e.parameters if p.name == parameter).option}"
+
+
+def effects_from_options(fmu: str, options: dict) -> dict:
+    """The effects an FMU's option values switch on: ``{effect: {parameter: value}}``
+    from ``{option: value}`` (the FMU's variables), only those that are on."""
+    out = {}
+    for e in of_fmu(fmu):
+        params = {p.name: float(options[p.option]) for p in e.parameters}
+        if e.is_on(params):
+            out[e.name] = params
+    return out

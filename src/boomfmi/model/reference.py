@@ -1,0 +1,227 @@
+"""The monolithic reference: the assembled boom as one ODE, solved by scipy.
+
+The boom's parts (:class:`.boom.Boom`) become one right-hand side (:func:`rhs`) for the
+state ``(p_a, p_b, x, v)`` (plus the spool's position with valve_dynamics and the
+chambers' air masses with heat_transfer), integrated with LSODA (or Radau) at tight
+tolerance.  Discontinuities are handled as events, never smoothed, by the stick/slip/
+stop state machine :class:`StickSlip`, which needs no ODE solve to be tested:
+
+* the command's steps are breakpoints (the integration restarts there);
+* while the piston slides, its velocity reaching zero and the piston reaching a stop
+  end the segment; the stick test of Eq. 9 then picks the next mode;
+* while it sticks (or rests against a stop), the drive force reaching the static
+  friction level ``F_s cos(phi)`` (away from a stop) ends the segment.
+
+:class:`Resampler` puts the segments' dense output on the requested times and applies
+the measurement path.  This is the yardstick for the co-simulation's error
+(``benchmarks/cosim_accuracy.py``) and, with effects switched on, the diagnosis's fast
+model.
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import numpy as np
+import pandas as pd
+from scipy.integrate import solve_ivp
+
+from .. import physics as ph
+from ..physics import reference_rig
+from .boom import Boom, Model
+
+
+class Layout:
+    """Where each state lives in the ODE's vector: ``p_a, p_b, x, v`` at 0 to 3, then
+    the spool's position (``i_y``) and the chambers' air masses (``i_m``, ``i_m + 1``)
+    where their effects are on (else None)."""
+
+    def __init__(self, boom: Boom):
+        self.i_y = 4 if boom.tau_spool > 0 else None
+        self.i_m = (4 + (self.i_y is not None)) if boom.h_wall > 0 else None
+        self.n = 4 + (self.i_y is not None) + 2 * (self.i_m is not None)
+        self.atol = np.array([1e-4, 1e-4, 1e-13, 1e-11] + [1e-9] * (self.i_y is not None)
+                             + [1e-15, 1e-15] * (self.i_m is not None))
+
+    def initial(self, boom: Boom, model: Model, u0: float) -> np.ndarray:
+        y = np.zeros(self.n)
+        y[:4] = (model.p_a0, model.p_b0, model.x0, 0.0)
+        if self.i_y is not None:
+            y[self.i_y] = u0
+        if self.i_m is not None:
+            y[self.i_m], y[self.i_m + 1] = boom.air_masses(model.p_a0, model.p_b0, model.x0)
+        return y
+
+
+def rhs(boom: Boom, layout: Layout, u: float, f_ext: float, mode: int, y) -> list:
+    """The state's derivatives in ``mode`` (+1 / -1 sliding, 0 stuck) under the command
+    ``u`` [V] and external force ``f_ext`` [N]."""
+    p_a, p_b, x, v = y[0], y[1], y[2], y[3]
+    i_y, i_m = layout.i_y, layout.i_m
+    cmd = y[i_y] if i_y is not None else u
+    if boom.command_effects:            # (the stages without effects are skipped: the hot path)
+        cmd = boom.opening(cmd)
+    mdot_a, mdot_b = ph.chamber_flows(cmd, p_a, p_b, boom.valve, boom.gas)
+    if boom.inflow_effects:
+        mdot_a, mdot_b, _, _ = boom.inflows(mdot_a, mdot_b, None, None, p_a, p_b, x)
+    if i_m is None:
+        dp_a, dp_b = ph.pressure_rates(p_a, p_b, mdot_a, mdot_b, x, v, boom.cylinder, boom.gas)
+    else:
+        dp_a, dp_b = boom.pressure_rates(p_a, p_b, mdot_a, mdot_b, x, v, (y[i_m], y[i_m + 1]))
+    extra = []
+    if i_y is not None:
+        extra.append(boom.spool_rate(y[i_y], u))
+    if i_m is not None:
+        extra += [mdot_a, mdot_b]
+    if mode == 0:
+        return [dp_a, dp_b, 0.0, 0.0, *extra]
+    phi = ph.phi_from_x(x, boom.geometry)
+    F = ph.drive_force(p_a, p_b, phi, f_ext, boom.cylinder, boom.load, boom.P_atm)
+    load = boom.load_at(boom.load, v, p_a, p_b) if boom.friction_effects else boom.load
+    return [dp_a, dp_b, v, ph.sliding_acceleration(v, F, phi, mode, load), *extra]
+
+
+class StickSlip:
+    """Eq. 9's modes of the piston, as ``physics.load.slide_or_stick`` applies them:
+    +1 / -1 sliding, 0 stuck in mid-stroke or resting against a stop; the events that
+    end a mode, and the mode after one."""
+
+    def __init__(self, boom: Boom):
+        self.boom = boom
+        self.L = boom.cylinder.L
+
+    def forces(self, y, f_ext: float):
+        """(drive force [N], static friction level ``F_s cos(phi)`` [N]) in state ``y``."""
+        b = self.boom
+        return b.drive_force(y[0], y[1], y[2], f_ext), b.load.F_s * math.cos(ph.phi_from_x(y[2], b.geometry))
+
+    def next_mode(self, y, f_ext: float) -> int:
+        """The mode from rest: the piston breaks away when the drive exceeds the static
+        level, and only if the Coulomb friction then leaves a net force in that direction
+        (F_s below F_d would otherwise stop it at once, forever), and not into a stop."""
+        F, limit = self.forces(y, f_ext)
+        if abs(F) <= limit:
+            return 0
+        s = 1 if F > 0 else -1
+        if (s > 0 and y[2] >= self.L) or (s < 0 and y[2] <= 0.0):
+            return 0
+        c = math.cos(ph.phi_from_x(y[2], self.boom.geometry))
+        if s * (F - s * self.boom.load.F_d * c) <= 0.0:
+            return 0
+        return s
+
+    def events(self, mode: int, y, f_ext: float) -> list:
+        """The terminal events that end ``mode`` from state ``y``.  Each sits a hair past
+        its threshold (1e-12 m/s, 1e-12 m, 1e-9 N), so a segment that starts on a
+        threshold does not trigger it again at once."""
+        L, s = self.L, mode
+        if s != 0:
+            stop_v = lambda _, y: y[3] + s * 1e-12
+            stop_v.terminal, stop_v.direction = True, -s
+            stop_x = (lambda _, y: y[2] - L - 1e-12) if s > 0 else (lambda _, y: y[2] + 1e-12)
+            stop_x.terminal, stop_x.direction = True, s
+            return [stop_v, stop_x]
+
+        def away_up(_, y):
+            F, limit = self.forces(y, f_ext)
+            return F - limit - 1e-9
+
+        def away_down(_, y):
+            F, limit = self.forces(y, f_ext)
+            return -F - limit - 1e-9
+        away_up.terminal, away_up.direction = True, 1
+        away_down.terminal, away_down.direction = True, 1
+        events = []
+        if y[2] < L:
+            events.append(away_up)
+        if y[2] > 0.0:
+            events.append(away_down)
+        return events
+
+    def after_event(self, mode: int, y, f_ext: float) -> int:
+        """The mode after an event ended ``mode`` at state ``y`` (modified in place: a
+        sliding piston is stopped there, within the stroke)."""
+        if mode != 0:
+            y[3] = 0.0
+            y[2] = min(max(y[2], 0.0), self.L)
+            return self.next_mode(y, f_ext)
+        new = self.next_mode(y, f_ext)
+        F, limit = self.forces(y, f_ext)
+        if new == 0 and abs(F) <= limit + 1e-6:
+            new = 1 if F > 0 else -1           # grazing: nudge past the event
+        return new
+
+
+class Resampler:
+    """The segments' dense solutions put on the output ``times`` [s]."""
+
+    def __init__(self, times: np.ndarray):
+        self.times = times
+        self.out = np.full((len(times), 4), np.nan)
+        self.inputs = np.full((len(times), 2), np.nan)
+
+    def segment(self, t0: float, t1: float, sol, u: float, f_ext: float, stuck: bool) -> None:
+        """Record the segment from ``t0`` to ``t1`` [s]: states from its dense output,
+        v exactly 0 where the piston was ``stuck``."""
+        times = self.times
+        sel = (times >= t0 - 1e-12) & (times <= t1 + 1e-12)
+        if sel.any():
+            self.out[sel] = sol(times[sel])[:4].T
+            self.inputs[sel] = (u, f_ext)
+        if stuck:
+            self.out[sel, 3] = 0.0
+
+    def frame(self, boom: Boom) -> pd.DataFrame:
+        """``time, u, f_ext, p_a, p_b, x, v, alpha`` (absolute pressures), x within the
+        stroke, and the measured channels through the measurement path."""
+        times, out, inputs = self.times, self.out, self.inputs
+        df = pd.DataFrame({"time": times, "u": inputs[:, 0], "f_ext": inputs[:, 1],
+                           "p_a": out[:, 0], "p_b": out[:, 1], "x": np.clip(out[:, 2], 0.0, boom.cylinder.L),
+                           "v": out[:, 3]})
+        df["alpha"] = ph.alpha_from_x(df["x"].to_numpy(), boom.geometry)
+        if boom.tau_sensor > 0:
+            for col in ("p_a", "p_b", "alpha", "x"):
+                df[col] = boom.measured(df[col].to_numpy(), times)
+        return df
+
+
+def simulate_reference(model: Model, command: Callable[[float], dict], stop_time: float,
+                       times: np.ndarray | None = None, breakpoints=(), rtol: float = 1e-9,
+                       method: str = "LSODA") -> pd.DataFrame:
+    """Solve the boom from rest at ``p_a0, p_b0, x0`` under ``command(t) -> {"u", "f_ext"}``.
+
+    ``command`` must be piecewise constant between ``breakpoints`` [s] (the integrator
+    restarts at each).  Returns a DataFrame on ``times`` (default: every ms) with
+    columns ``time, u, f_ext, p_a, p_b, x, v, alpha`` (absolute pressures).
+    """
+    boom = Boom(model)
+    if times is None:
+        times = np.round(np.arange(0.0, stop_time + 1e-12, 1e-3), 12)
+    times = np.asarray(times, dtype=float)
+    layout = Layout(boom)
+    machine = StickSlip(boom)
+    result = Resampler(times)
+    cuts = sorted({float(b) for b in breakpoints if 0.0 < b < stop_time} | {stop_time})
+    y = layout.initial(boom, model, command(0.0).get("u", reference_rig.u_centre))
+    t = 0.0
+    mode = 0
+    for cut in cuts:
+        cmd = command(t)
+        u, f_ext = cmd.get("u", reference_rig.u_centre), cmd.get("f_ext", 0.0)
+        if mode == 0:
+            mode = machine.next_mode(y, f_ext)
+        while t < cut - 1e-15:
+            s = mode
+            events = machine.events(s, y, f_ext)
+            sol = solve_ivp(lambda _, y, s=s: rhs(boom, layout, u, f_ext, s, y), (t, cut), y,
+                            method=method, rtol=rtol, atol=layout.atol, events=events or None,
+                            dense_output=True)
+            if sol.status < 0:
+                raise RuntimeError(f"reference solver failed at t = {t:g} s: {sol.message}")
+            t_new = float(sol.t[-1])
+            y = sol.y[:, -1].copy()
+            if sol.status == 1:          # an event ended the segment
+                mode = machine.after_event(s, y, f_ext)
+            result.segment(t, t_new, sol.sol, u, f_ext, s == 0)
+            t = t_new
+    return result.frame(boom)
