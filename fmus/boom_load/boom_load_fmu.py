@@ -44,6 +44,9 @@ class BoomLoad(BoomSlave):
         load = Load(K_v=self.K_v, F_s=self.F_s, F_d=self.F_d, F_L=self.F_L, M=self.M)
         self._geom = Geometry(a=self.a, b=self.b, h=self.h, l_min=self.l_min)
         check_load(load)
+        if load.F_s < load.F_d:
+            raise ParameterError("F_s", load.F_s, f"the static friction must be at least the Coulomb force "
+                                                  f"F_d = {load.F_d:g} N (Eq. 9)")
         for name in ("L", "A_a", "A_b", "P_atm"):
             require_positive(name, getattr(self, name))
         check_geometry(self._geom, self.L)

@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -32,9 +33,21 @@ def _check(args) -> int:
     import pandas as pd
     from fmpy.validation import validate_fmu
 
-    from .system.instance import run_table
+    from .system.instance import model_description, run_table
+    if not Path(args.fmu_dir).is_dir():
+        raise ValueError(f"{args.fmu_dir}: no such folder")
+    fmus = sorted(Path(args.fmu_dir).glob("*.fmu"))
+    if not fmus:
+        raise ValueError(f"{args.fmu_dir}: no .fmu files to check")
     failures = 0
-    for fmu in sorted(Path(args.fmu_dir).glob("*.fmu")):
+    for fmu in fmus:
+        try:
+            model_description(fmu)
+        except ValueError as e:
+            print(f"{fmu.name:24s} INVALID: {e}")
+            print(f"boomfmi check: {e}", file=sys.stderr)
+            failures += 1
+            continue
         problems = validate_fmu(str(fmu))
         status = "valid" if not problems else "INVALID: " + "; ".join(problems)
         ref_dir = Path(args.references) / fmu.stem
@@ -49,6 +62,28 @@ def _check(args) -> int:
         failures += bool(problems)
         print(f"{fmu.name:24s} {status}")
     return 1 if failures else 0
+
+
+def _port(text: str) -> int:
+    """An argparse type: a port number, 0 to 65535."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port number") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{port} is not a port: 0 to 65535")
+    return port
+
+
+def _positive(text: str) -> float:
+    """An argparse type: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (value > 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"{text} must be a finite number > 0")
+    return value
 
 
 def _value(text: str):
@@ -146,14 +181,16 @@ def _identify(args) -> int:
         print(f"warning: {w}")
     for path, err in doc.get("nrmse_holdout", {}).items():
         print(f"holdout {path}: NRMSE x {100 * err['x']:.2f} %, p_a {100 * err['p_a']:.2f} %, p_b {100 * err['p_b']:.2f} %")
-    print(f"wrote {args.out}, {args.out.with_suffix('.ssv')}"
-          + (f", {args.out.with_suffix('.png')}" if args.out.with_suffix('.png').exists() else ""))
+    print("wrote " + ", ".join(doc["written"]))
     return 0
 
 
 def _diagnose(args) -> int:
     from .diagnose import diagnose
-    doc = diagnose(args.recordings, args.holdout, args.out, ssp=args.ssp)
+    doc = diagnose(args.recordings, args.holdout, args.out, ssp=args.ssp,
+                   progress=lambda text: print(f"diagnose: {text}", file=sys.stderr, flush=True))
+    for w in (doc.get("baseline") or {}).get("warnings", []):
+        print(f"warning (baseline): {w}")
     if not doc["judgeable"]:
         print(f"cannot judge: {doc['reason']}")
     else:
@@ -202,13 +239,13 @@ def main(argv=None) -> int:
     p = sub.add_parser("rig", help="the virtual rig")
     rig_sub = p.add_subparsers(dest="rig_command", required=True)
     p = rig_sub.add_parser("serve", help="simulate the machine behind an authenticated UDP link")
-    p.add_argument("--port", type=int, required=True, help="UDP port (0: any free port, printed)")
+    p.add_argument("--port", type=_port, required=True, help="UDP port (0: any free port, printed)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: loopback only)")
     p.add_argument("--lockstep", action="store_true", help="advance one sample per command instead of real time")
     p.add_argument("--record", type=Path, help="write every measured sample to this recording")
     p.add_argument("--config", type=Path, help="JSON: effects, noise, contact, parameters (default: reference rig, noise on)")
     p.add_argument("--key-file", help="file holding the shared link key (default: $BOOMFMI_LINK_KEY)")
-    p.add_argument("--watchdog", type=float, default=0.05, help="fail-safe after this long without a command [s]")
+    p.add_argument("--watchdog", type=_positive, default=0.05, help="fail-safe after this long without a command [s]")
     p.add_argument("--priority", type=int, default=0, metavar="N",
                    help="run under the real-time scheduler (SCHED_FIFO) at priority N, 1 to 99 (needs the "
                         "right: root or CAP_SYS_NICE); 0: the normal scheduler (default)")

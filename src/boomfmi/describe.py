@@ -3,12 +3,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from fmpy import read_model_description
+from .system.instance import model_description
 
 
 def interface_table(path) -> str:
     """Markdown table of an FMU's variables: name, causality, unit, start, bounds, meaning."""
-    md = read_model_description(str(path))
+    md = model_description(path)
     order = {"input": 0, "output": 1, "parameter": 2}
     rows = ["| variable | causality | unit | start | min..max | description |",
             "|---|---|---|---|---|---|"]

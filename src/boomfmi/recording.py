@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .physics import reference_rig
+from .physics import Valve, reference_rig
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -32,6 +32,15 @@ REQUIRED = ("t", "u", "p_a", "p_b", "alpha")
 RIG_KEYS = ("A_max", "P_s", "P_e", "k", "R", "T", "A_a", "A_b", "L", "V_a0", "V_b0", "a", "b",
             "h", "l_min", "K_v", "F_s", "F_d", "F_L", "M", "P_atm", "supply_pressure_gauge")
 OPTIONAL = ("f_ext", "x")
+#: The sidecar's top-level keys: ``rig`` and ``notes`` (recording-format.md) and
+#: ``incomplete``, the reason a recorder gives when a run ended early.
+SIDECAR_KEYS = ("rig", "notes", "incomplete")
+#: The largest recording read [bytes] (about an hour at 1 kHz); $BOOMFMI_MAX_RECORDING_MB raises it.
+MAX_BYTES = 256 * 2**20
+#: Fewest samples identification and diagnosis work on (0.1 s at the 1 ms DAQ).
+MIN_SAMPLES = 100
+#: Sample spacing [s] a recording's t may have: the DAQ samples every 1 ms.
+DT_RANGE = (1e-5, 0.05)
 UNITS = {"t": "s", "u": "V", "p_a": "Pa (gauge)", "p_b": "Pa (gauge)", "alpha": "rad",
          "f_ext": "N", "x": "m"}
 
@@ -59,6 +68,8 @@ class Recording:
     data: "pd.DataFrame"
     rig: dict = field(default_factory=dict)      #: reference-rig overrides from the sidecar
     notes: str = ""
+
+    incomplete: str = ""                         #: why the run ended early (sidecar), else ""
 
     @property
     def P_atm(self) -> float:
@@ -88,7 +99,7 @@ def read_recording(path) -> Recording:
         data[c] = col
     data = data[header]
     return Recording(Path(path), data, rig=dict(sidecar.get("rig", {})),
-                     notes=str(sidecar.get("notes", "")))
+                     notes=str(sidecar.get("notes", "")), incomplete=str(sidecar.get("incomplete", "")))
 
 
 def parse_recording(path):
@@ -97,8 +108,14 @@ def parse_recording(path):
     path = Path(path)
     if not path.is_file():
         raise RecordingError(path, "no such file")
+    limit = max_bytes()
+    size = path.stat().st_size
+    if size > limit:
+        raise RecordingError(path, f"{size / 2**20:.0f} MiB is more than the {limit / 2**20:.0f} MiB a recording "
+                                   f"may have (about an hour at 1 kHz): cut it into experiments, or set "
+                                   f"$BOOMFMI_MAX_RECORDING_MB")
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")      # a byte-order mark (Excel's) is dropped
     except UnicodeDecodeError as e:
         raise RecordingError(path, f"not UTF-8 text ({e.reason} at byte {e.start})") from None
     sidecar = _read_sidecar(path)
@@ -112,8 +129,8 @@ def parse_recording(path):
         raise RecordingError(path, f"the header is separated by {delim!r}, not by commas", row=1)
     for col in REQUIRED:
         if col not in header:
-            raise RecordingError(path, f"missing required column (the header has {', '.join(header)})",
-                                 row=1, column=col)
+            raise RecordingError(path, f"missing required column (the header has "
+                                       f"{', '.join(repr(h) for h in header)})", row=1, column=col)
     if len(set(header)) != len(header):
         dup = next(h for h in header if header.count(h) > 1)
         raise RecordingError(path, "the column appears twice", row=1, column=dup)
@@ -178,6 +195,12 @@ def _read_sidecar(path: Path) -> dict:
         raise RecordingError(side, f"the sidecar is not valid JSON: {e}") from None
     if not isinstance(content, dict):
         raise RecordingError(side, "the sidecar must hold a JSON object")
+    for k in content:
+        if k not in SIDECAR_KEYS:
+            raise RecordingError(side, f"unknown key {k!r}; a sidecar may hold {', '.join(SIDECAR_KEYS)}")
+    for k in ("notes", "incomplete"):
+        if k in content and not isinstance(content[k], str):
+            raise RecordingError(side, f"{k!r} must be text, not {content[k]!r}")
     rig_over = content.get("rig", {})
     if not isinstance(rig_over, dict):
         raise RecordingError(side, "'rig' must be an object of reference-rig values")
@@ -187,6 +210,65 @@ def _read_sidecar(path: Path) -> dict:
         if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
             raise RecordingError(side, f"rig value {k!r} must be a finite number, not {v!r}")
     return content
+
+
+def check_distinct(fits, hold: Recording) -> None:
+    """Raise ``ValueError`` where the holdout ``hold`` is one of the fit recordings (the
+    same file, or a copy of its samples): its error would be the fit's own, not a
+    holdout's."""
+    for f in fits:
+        if Path(f.path).resolve() == Path(hold.path).resolve():
+            raise ValueError(f"holdout {hold.path} is also a fit recording: a holdout must be a recording "
+                             f"that is not fitted on")
+        if f.data.shape == hold.data.shape and f.data.equals(hold.data):
+            raise ValueError(f"holdout {hold.path} holds the same samples as the fit recording {f.path}: a "
+                             f"holdout must be a recording that is not fitted on")
+
+
+def max_bytes() -> int:
+    """The size limit of a recording [bytes]: :data:`MAX_BYTES` or $BOOMFMI_MAX_RECORDING_MB."""
+    env = os.environ.get("BOOMFMI_MAX_RECORDING_MB")
+    if env:
+        try:
+            return int(float(env) * 2**20)
+        except ValueError:
+            raise ValueError(f"$BOOMFMI_MAX_RECORDING_MB must be a number, not {env!r}") from None
+    return MAX_BYTES
+
+
+def check_plausible(rec: Recording) -> None:
+    """Raise :class:`RecordingError` where a recording reads well but cannot be what the
+    format says: too few samples to judge anything, a time column that is not in
+    seconds at a DAQ's rate, pressures far out of scale with the rig's supply (bar or
+    kPa where Pa belong), samples held while the link was lost."""
+    d, path = rec.data, rec.path
+    n = len(d)
+    if n < MIN_SAMPLES:
+        raise RecordingError(path, f"{n} samples: identification and diagnosis need at least {MIN_SAMPLES} "
+                                   f"(0.1 s at the 1 ms DAQ)")
+    dt = float(np.median(np.diff(d["t"].to_numpy(float))))
+    if not DT_RANGE[0] <= dt <= DT_RANGE[1]:
+        unit = "milliseconds" if dt > DT_RANGE[1] else "microseconds"
+        raise RecordingError(path, f"the samples are {dt:g} s apart (median): t must be in seconds at the DAQ's "
+                                   f"rate ({DT_RANGE[0]:g} to {DT_RANGE[1]:g} s apart); is it in {unit}?",
+                             column="t")
+    supply = rec.rig_tuple(Valve).P_s - rec.P_atm
+    peak = max(float(np.max(np.abs(d["p_a"].to_numpy(float)))), float(np.max(np.abs(d["p_b"].to_numpy(float)))))
+    opened = bool(np.any(np.abs(d["u"].to_numpy(float) - reference_rig.u_centre) > 0.5))
+    if opened and peak < 0.02 * supply:
+        raise RecordingError(path, f"the chamber pressures peak at {peak:g} Pa gauge while the valve opens, "
+                                   f"{100 * peak / supply:.2g} % of the supply's {supply:g} Pa: are they in bar or "
+                                   f"kPa? The format wants Pa (gauge)", column="p_a")
+    if peak > 1.5 * supply + 1e5:
+        raise RecordingError(path, f"the chamber pressures reach {peak:g} Pa gauge, beyond the supply's "
+                                   f"{supply:g} Pa: a wrong unit, or set the supply in the sidecar "
+                                   f"(rig.supply_pressure_gauge)", column="p_a")
+    if "link_ok" in d:
+        held = np.flatnonzero(d["link_ok"].to_numpy(float) == 0)
+        if held.size:
+            raise RecordingError(path, f"{held.size} samples were held while the link was lost (link_ok = 0), "
+                                       f"the first at line {int(held[0]) + 2}: they are not measurements; "
+                                       f"cut them off or record again", row=int(held[0]) + 2, column="link_ok")
 
 
 class RecordingWriter:
@@ -201,10 +283,17 @@ class RecordingWriter:
                 raise ValueError(f"a recording needs column {c!r}")
         self.path.parent.mkdir(parents=True, exist_ok=True)
         if sidecar:
-            self.path.with_suffix(".json").write_text(json.dumps(sidecar, indent=2))
+            self.set_sidecar(sidecar)
         self._f = open(self.path, "w", encoding="utf-8", newline="")
         self._f.write(",".join(self.columns) + "\n")
         self._f.flush()
+
+    def set_sidecar(self, sidecar: dict) -> None:
+        """Write the sidecar (atomically: a reader sees the old one or the new one)."""
+        side = self.path.with_suffix(".json")
+        tmp = side.with_name(f".{side.name}.partial-{os.getpid()}")
+        tmp.write_text(json.dumps(sidecar, indent=2))
+        os.replace(tmp, side)
 
     def write(self, row) -> None:
         """Append one sample: a mapping by column name or a sequence in column order."""

@@ -14,10 +14,12 @@ force estimator, its ``f_est`` and ``f_reflect``.
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import pandas as pd
 
+from . import physics as ph
 from .compare import initial_state
 from .experiments import PROFILES, profile
 from .physics import reference_rig
@@ -95,6 +97,25 @@ def bound_value(cosim, name: str) -> float:
                  if n.rpartition(".")[2] == name), getattr(reference_rig, name))
 
 
+#: The longest communication step, as a share of a radian of the air springs' highest
+#: natural frequency: the cylinder takes the boom's motion as a held velocity over a
+#: step, which on the shipped boom keeps the chamber pressures physical (below the
+#: supply) up to about 2 ms and not at 5 ms (docs/cosim-accuracy.md).
+STABLE_SHARE = 0.1
+
+
+def max_stable_step(cosim) -> float:
+    """The longest communication step [s] at which the cylinder's coupling with the boom
+    stays stable: ``STABLE_SHARE / omega``, omega [rad/s] the air springs' natural
+    frequency with both chambers at the supply pressure, at the stroke end where it is
+    highest (``physics.pneumatic_stiffness`` over the moving mass)."""
+    cyl = ph.Cylinder(**{k: bound_value(cosim, k) for k in ph.Cylinder._fields})
+    gas = ph.Gas(k=bound_value(cosim, "k"))
+    P_s, M = bound_value(cosim, "P_s"), bound_value(cosim, "M")
+    stiffness = max(ph.pneumatic_stiffness(P_s, P_s, x, cyl, gas) for x in (0.0, cyl.L))
+    return STABLE_SHARE / math.sqrt(stiffness / M)
+
+
 def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
                    stop_time: float | None = None, algorithm: str = "gauss-seidel",
                    parameters=None, progress: bool = False, view: str | None = None) -> pd.DataFrame:
@@ -111,6 +132,13 @@ def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
         if over:             # the recording's rig over the SSP's own values, under --params
             cosim.structure.bind({n: Parameter(n, "Real", v) for n, v in over.items() if n not in cosim.given},
                                  f"{experiment} (sidecar)")
+        if any(i.model_description.modelName == "cylinder" for i in cosim.instances.values()):
+            limit = max_stable_step(cosim)
+            if cosim.step_size > limit:
+                raise ValueError(f"a step of {cosim.step_size:g} s is beyond what the cylinder's coupling with "
+                                 f"the boom keeps stable here ({limit * 1e3:.3g} ms: a tenth of a radian of the "
+                                 f"air springs' highest natural frequency); use --step {limit * 1e3:.2g}e-3 "
+                                 f"or less")
         u_names = [n for n in cosim.inputs if n.rpartition(".")[2] == "u"]
         if not u_names:
             raise ValueError(f"the system has no free input named 'u' to drive; its inputs: {cosim.inputs}")

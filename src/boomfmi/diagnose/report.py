@@ -20,24 +20,34 @@ from .._json import plain
 from ..compare import CHANNELS, model_for, nrmse, recorded, rig_model, shrink, simulate_recording
 from ..identify import identify_recordings
 from ..identify.preprocess import prepare
-from ..recording import read_recording
-from .attribute import attribute
+from ..outputs import OutputSet
+from ..recording import check_distinct, check_plausible, read_recording
+from .attribute import CANDIDATES, attribute
 from .confirm import agreement, confirm
 from .localise import localise
 
 MIN_TRAVEL = 1e-3     #: [m] a recording whose piston moves less than this cannot be judged
 
 
-def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=None) -> dict:
-    """Run the diagnosis and write its outputs into ``out_dir``; return the JSON document.
-    ``workers``: processes for the candidates' fits (default: one per core); ``ssp``:
-    the boom's system for the FMUs' confirmation (default build/excavator_boom.ssp)."""
+def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=None, progress=None) -> dict:
+    """Run the diagnosis and write its outputs into ``out_dir`` (as one set: all of them
+    or, on an error or interrupt, none; a PNG this run does not draw is removed); return
+    the JSON document.  ``workers``: processes for the candidates' fits (default: one
+    per core); ``ssp``: the boom's system for the FMUs' confirmation (default
+    build/excavator_boom.ssp); ``progress(text)``: told of each stage as it starts."""
+    say = progress or (lambda text: None)
     if not hold_paths:
         raise ValueError("diagnose needs at least one holdout recording (--holdout): shrink is measured there")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     fit_recs = [read_recording(p) for p in fit_paths]
     hold_recs = [read_recording(p) for p in hold_paths]
+    for r in fit_recs + hold_recs:
+        check_plausible(r)
+        if r.incomplete:
+            raise ValueError(f"{r.path}: the recording is marked incomplete in its sidecar ({r.incomplete}); "
+                             f"record it again")
+    for h in hold_recs:
+        check_distinct(fit_recs, h)
     rigs = {json.dumps(r.rig, sort_keys=True) for r in fit_recs + hold_recs}
     if len(rigs) > 1:
         raise ValueError("the recordings come from different rigs (their sidecars' 'rig' values differ): "
@@ -51,9 +61,14 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
         _write(out, doc, None, None, None)
         return doc
 
+    say(f"identifying the baseline on {len(fit_recs)} fit recording(s)")
     result, _, _ = identify_recordings(fit_paths, "fit")
+    for w in result.warnings:
+        say(f"warning (baseline): {w}")
     values = result.values()
+    say(f"fitting and scoring {len(CANDIDATES)} candidate effects (this is the long part)")
     att = attribute(values, fit_recs, hold_recs, workers=workers)
+    say(f"verdict {att.verdict}; localising the gap, confirming through the FMUs, drawing the report")
     hold = hold_recs[0]
     verdict_fx = {}
     if att.verdict and att.verdict != ["unexplained"]:
@@ -94,15 +109,20 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
     return doc
 
 
+#: every file a diagnosis writes; those a run does not write are removed with its set
+OUTPUTS = ("diagnosis.json", "report.html", *(f"overlay_{c}.png" for c in CHANNELS), "residual_breakdown.png")
+
+
 def _write(out: Path, doc: dict, hold, base_sim, after_sim, loc=None) -> None:
-    (out / "diagnosis.json").write_text(json.dumps(plain(doc), indent=2))
-    images = []
-    if hold is not None:
-        images = _plots(out, hold, base_sim, after_sim, loc, doc)
-    (out / "report.html").write_text(_html(doc, images))
+    with OutputSet(out, stale=OUTPUTS) as files:
+        images = []
+        if hold is not None:
+            images = _plots(files, hold, base_sim, after_sim, loc, doc)
+        files.path("report.html").write_text(_html(doc, images))
+        files.path("diagnosis.json").write_text(json.dumps(plain(doc), indent=2))
 
 
-def _plots(out: Path, hold, base_sim, after_sim, loc, doc) -> list[str]:
+def _plots(files: OutputSet, hold, base_sim, after_sim, loc, doc) -> list[str]:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -122,7 +142,7 @@ def _plots(out: Path, hold, base_sim, after_sim, loc, doc) -> list[str]:
         ax.legend(loc="best", fontsize=8)
         fig.tight_layout()
         name = f"overlay_{c}.png"
-        fig.savefig(out / name, dpi=100)
+        fig.savefig(files.path(name), dpi=100, format="png")
         plt.close(fig)
         names.append(name)
     if loc is not None:
@@ -132,7 +152,7 @@ def _plots(out: Path, hold, base_sim, after_sim, loc, doc) -> list[str]:
             ax.set_title(f"share of the residual {title}")
             ax.tick_params(axis="x", rotation=30)
         fig.tight_layout()
-        fig.savefig(out / "residual_breakdown.png", dpi=100)
+        fig.savefig(files.path("residual_breakdown.png"), dpi=100, format="png")
         plt.close(fig)
         names.append("residual_breakdown.png")
     return names
@@ -160,6 +180,8 @@ def _html(doc: dict, images: list[str]) -> str:
     base = doc.get("baseline") or {}
     params = ", ".join(f"{k} = {v:.4g}" for k, v in (base.get("params") or {}).items())
     before = " / ".join(f"{100 * v:.3f} %" for v in (base.get("nrmse_holdout") or {}).values())
+    warnings = "".join(f"<li>{e(w)}</li>" for w in base.get("warnings") or [])
+    warnings = f"<p><b>Warnings of the baseline's identification:</b></p><ul>{warnings}</ul>" if warnings else ""
     imgs = "".join(f'<p><img src="{e(n)}" alt="{e(n)}" style="max-width:100%"></p>' for n in images)
     conf = _confirmation_html(doc.get("confirmation"))
     return f"""<!doctype html><html><head><meta charset="utf-8"><title>boomfmi diagnosis</title>
@@ -168,7 +190,7 @@ td,th{{border:1px solid #ccc;padding:4px 8px;font-size:13px}}</style></head><bod
 <h1>Diagnosis of the sim-to-real gap</h1>
 <p style="font-size:1.3em">{headline}</p>
 <h2>Baseline</h2><p>Re-identified on the fit recordings: {e(params)}.<br>
-Holdout NRMSE p_a / p_b / x: {before}.</p>
+Holdout NRMSE p_a / p_b / x: {before}.</p>{warnings}
 <h2>Before and after, on the holdout recording</h2>{imgs}
 <h2>Where the gap lies</h2><table><tr><th>channel</th><th>regime</th><th>subsystem</th><th>share</th><th>windows [s]</th></tr>{where}</table>
 <h2>Candidate effects, best first</h2><table><tr><th>effect</th><th>fitted parameters</th><th>shrink</th><th>score</th>

@@ -13,7 +13,8 @@ from pathlib import Path
 
 from .._json import plain
 from ..compare import nrmse, recorded, rig_model, simulate_recording
-from ..recording import read_recording
+from ..outputs import OutputSet
+from ..recording import check_distinct, check_plausible, read_recording
 from ..system.ssv import write_ssv
 from .fit import FitResult, identify
 from .paper import identify_paper
@@ -28,7 +29,14 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
                         cutoff: float = CUTOFF, eq13: str = "printed"):
     """Read, validate and prepare the recordings, then identify; returns
     ``(FitResult, recordings, prepared)``."""
+    if method not in ("fit", "paper"):
+        raise ValueError(f"unknown method {method!r}: 'paper' or 'fit'")
     recs = [read_recording(p) for p in paths]
+    for r in recs:
+        check_plausible(r)
+        if r.incomplete:
+            raise ValueError(f"{r.path}: the recording is marked incomplete in its sidecar ({r.incomplete}); "
+                             f"record it again")
     rigs = {json.dumps(r.rig, sort_keys=True) for r in recs}
     if len(rigs) > 1:
         raise ValueError("the recordings come from different rigs (their sidecars' 'rig' values differ): "
@@ -38,13 +46,39 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
     if method == "fit":
         result = identify(preps, rig.cylinder, rig.geometry, P_atm=rig.P_atm, with_A_max=with_A_max,
                           valve=rig.valve, gas=rig.gas)
-    elif method == "paper":
-        result = identify_paper(preps, rig.cylinder, P_atm=rig.P_atm, eq13=eq13)
     else:
-        raise ValueError(f"unknown method {method!r}: 'paper' or 'fit'")
+        result = identify_paper(preps, rig.cylinder, P_atm=rig.P_atm, eq13=eq13)
     result.details["recordings"] = [str(p) for p in paths]
     result.details["cutoff_Hz"] = cutoff
+    _check_physical(result, paths)
     return result, recs, preps
+
+
+#: Identified parameters that no machine has below these values (M and A_max: above)
+PHYSICAL_MIN = {"K_v": 0.0, "F_s": 0.0, "F_d": 0.0, "M": 0.0, "A_max": 0.0}
+
+
+def _check_physical(result: FitResult, paths) -> None:
+    """Non-physical values (a negative mass, negative friction) from the sound fit are an
+    error: the recording is not what it claims (its time or pressure scale, most
+    often).  The paper's method gives such values by itself (docs/identification.md):
+    for it they are loud warnings, and :func:`write_outputs` writes no parameter set.
+    An interval of zero width is never a result: it is reported as unknown."""
+    bad = [f"{k} = {e.value:.4g} {e.unit}" for k, e in result.params.items()
+           if k in PHYSICAL_MIN and math.isfinite(e.value)
+           and (e.value < PHYSICAL_MIN[k] or (k in ("M", "A_max") and e.value <= 0))]
+    if bad and result.method == "fit":
+        raise ValueError(f"identification from {', '.join(str(p) for p in paths)} gave {', '.join(bad)}: no machine "
+                         f"has such values; check the recordings' units (t in s, pressures in Pa gauge) and "
+                         f"that they hold motion in both directions")
+    if bad:
+        result.warnings.append(f"not physical: {', '.join(bad)}; no parameter set (.ssv) is written")
+    for k, e in result.params.items():
+        lo, hi = e.ci95
+        if math.isfinite(lo) and math.isfinite(hi) and hi - lo <= 0.0:
+            result.params[k] = type(e)(e.value, (math.nan, math.nan), e.unit)
+            result.warnings.append(f"the 95 % interval of {k} could not be computed (zero width): "
+                                   f"treat {k} as unknown in its precision")
 
 
 def plot_fit(values: dict, rec, path) -> None:
@@ -68,14 +102,18 @@ def plot_fit(values: dict, rec, path) -> None:
     axes[0].legend(loc="upper left")
     axes[0].set_title(f"{Path(rec.path).name}: recorded and simulated response")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, format="png")
     plt.close(fig)
 
 
 def write_outputs(result: FitResult, recs, out, holdout=()) -> dict:
-    """Write ``out`` (params.json), ``params.ssv`` and ``params.png`` beside it."""
+    """Write ``out`` (params.json), ``params.ssv`` and ``params.png`` beside it, as one set
+    (:class:`OutputSet`: all or none; a file this run does not write is removed, so no
+    earlier run's passes for this one's).  ``doc["written"]`` lists the files."""
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    fits = {str(r.path) for r in recs}
+    for h in holdout:
+        check_distinct(recs, read_recording(h))
     values = result.values()
     doc = {"method": result.method,
            "params": {k: {"value": e.value, "ci95": list(e.ci95), "unit": e.unit}
@@ -87,12 +125,17 @@ def write_outputs(result: FitResult, recs, out, holdout=()) -> dict:
     for h in holdout:
         hr = read_recording(h)
         doc.setdefault("nrmse_holdout", {})[str(hr.path)] = nrmse(simulate_recording(finite, hr), hr)
-    out.write_text(json.dumps(doc, indent=2))
-    ssv = out.with_suffix(".ssv")
-    write_ssv(ssv, "identified", {SSP_NAMES[k]: (v, result.params[k].unit) for k, v in finite.items()},
-              f"identified by boomfmi ({result.method}) from " + ", ".join(str(r.path) for r in recs))
-    if _usable(finite):
-        plot_fit(finite, recs[0], out.with_suffix(".png"))
+    physical = not any(w.startswith("not physical") for w in result.warnings)
+    names = (out.name, out.with_suffix(".ssv").name, out.with_suffix(".png").name)
+    with OutputSet(out.parent, stale=names) as files:
+        if physical:
+            write_ssv(files.path(names[1]), "identified",
+                      {SSP_NAMES[k]: (v, result.params[k].unit) for k, v in finite.items()},
+                      f"identified by boomfmi ({result.method}) from " + ", ".join(sorted(fits)))
+        if physical and _usable(finite):
+            plot_fit(finite, recs[0], files.path(names[2]))
+        doc["written"] = [str(p) for p in [out, *files.written()]]
+        files.path(names[0]).write_text(json.dumps(doc, indent=2))
     return doc
 
 

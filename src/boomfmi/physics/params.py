@@ -65,10 +65,12 @@ def check_gas(gas: Gas) -> None:
 
 
 def check_valve(valve: Valve) -> None:
-    """Raise unless A_max >= 0, P_s > 0, P_e > 0 and u_span > 0."""
+    """Raise unless A_max >= 0, P_s > P_e > 0 and u_span > 0."""
     require_non_negative("A_max", valve.A_max)
     require_positive("P_s", valve.P_s)
     require_positive("P_e", valve.P_e)
+    if not valve.P_s > valve.P_e:
+        raise ParameterError("P_s", valve.P_s, f"the supply must be above the exhaust pressure P_e = {valve.P_e:g} Pa")
     require_finite("u_centre", valve.u_centre)
     require_positive("u_span", valve.u_span)
 

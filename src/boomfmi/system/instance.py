@@ -7,7 +7,11 @@ the FMI status and the FMU's own message.
 """
 from __future__ import annotations
 
+import itertools
 import shutil
+import weakref
+import zipfile
+from ctypes import byref
 from pathlib import Path
 from typing import Iterable, Mapping
 
@@ -16,7 +20,29 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
 
+try:
+    from fmpy.logging import addLoggerProxy
+except (ImportError, OSError):  # pragma: no cover - fmpy without its native logging proxy
+    addLoggerProxy = None
+
 STATUS = ("ok", "warning", "discard", "error", "fatal", "pending")
+
+# fmpy's native logger proxy (which formats the FMU's printf-style messages) keeps ONE
+# Python logger for the whole process: the last one registered.  So every instance
+# registers the same dispatcher, and tells its messages apart by the component
+# environment it hands the FMU at instantiation, which the FMU passes back with each.
+_INSTANCES: dict[int, "weakref.ref[FmuInstance]"] = {}
+_ENVIRONMENTS = itertools.count(1)
+
+
+def _dispatch(env, instance_name, status, category, message):
+    ref = _INSTANCES.get(env or 0)
+    instance = ref() if ref is not None else None
+    if instance is not None:
+        instance._log(env, instance_name, status, category, message)
+
+
+_LOGGER = fmi2CallbackLoggerTYPE(_dispatch)
 
 
 class FmuError(RuntimeError):
@@ -28,6 +54,22 @@ class FmuError(RuntimeError):
         label = STATUS[status] if 0 <= status < len(STATUS) else "illegal status"
         detail = "; ".join(log) if log else "the FMU logged no message"
         super().__init__(f"{instance}: {function} returned fmi2{label.capitalize()}: {detail}")
+
+
+def model_description(path):
+    """fmpy's model description of the FMU at ``path``; a file that is not an FMU (not a
+    zip archive, no or a broken modelDescription.xml) raises ``ValueError`` naming it."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such FMU")
+    try:
+        return read_model_description(str(path))
+    except zipfile.BadZipFile:
+        raise ValueError(f"{path}: not an FMU (not a zip archive; a truncated or corrupted file?)") from None
+    except KeyError as e:
+        raise ValueError(f"{path}: not an FMU (no {e.args[0] if e.args else 'modelDescription.xml'} in it)") from None
+    except Exception as e:           # fmpy's own parse and validation errors
+        raise ValueError(f"{path}: not a valid FMU: {e}") from None
 
 
 class FmuInstance:
@@ -42,23 +84,20 @@ class FmuInstance:
 
     def __init__(self, path, name: str | None = None, debug_logging: bool = False):
         self.path = Path(path)
-        if not self.path.is_file():
-            raise FileNotFoundError(f"{self.path}: no such FMU")
-        self.model_description = read_model_description(str(self.path))
+        self.model_description = model_description(self.path)
         self.name = name or self.model_description.modelName
         self.variables = {v.name: v for v in self.model_description.modelVariables}
         self.messages: list[tuple[int, str]] = []
         self._unzip_dir = extract(str(self.path))
+        self._env = next(_ENVIRONMENTS)
+        _INSTANCES[self._env] = weakref.ref(self)
         self._callbacks = fmi2CallbackFunctions()
-        self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
+        self._callbacks.logger = _LOGGER
+        self._callbacks.componentEnvironment = self._env
         self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        try:
-            from fmpy.logging import addLoggerProxy
-            from ctypes import byref
+        if addLoggerProxy is not None:
             addLoggerProxy(byref(self._callbacks))
-        except Exception:  # pragma: no cover - fmpy without its logging proxy
-            pass
         try:
             self.fmu = FMU2Slave(guid=self.model_description.guid, unzipDirectory=self._unzip_dir,
                                  modelIdentifier=self.model_description.coSimulation.modelIdentifier,
@@ -66,6 +105,7 @@ class FmuInstance:
             self._call("fmi2Instantiate", self.fmu.instantiate, callbacks=self._callbacks,
                        loggingOn=debug_logging)
         except BaseException:
+            _INSTANCES.pop(self._env, None)
             shutil.rmtree(self._unzip_dir, ignore_errors=True)
             raise
         self._closed = False
@@ -184,6 +224,7 @@ class FmuInstance:
         try:
             self.fmu.freeInstance()
         finally:
+            _INSTANCES.pop(self._env, None)
             shutil.rmtree(self._unzip_dir, ignore_errors=True)
 
     def __enter__(self):

@@ -121,6 +121,7 @@ class CoSimulation:
                 fmu_path.write_bytes(self.structure.read(comp.source))
                 self.instances[name] = FmuInstance(fmu_path, name=name)
             check_against_fmus(self.structure, {n: i.model_description for n, i in self.instances.items()})
+            check_shared(self.structure, self.instances)
             self._wire()
         except BaseException:
             self.close()
@@ -376,6 +377,28 @@ def simulate_ssp(ssp, stop_time=None, step: float = 1e-3, algorithm: str = "gaus
     """Load, run and close an SSP system in one call (see :class:`CoSimulation`)."""
     with CoSimulation(ssp, step, algorithm, parameters) as cosim:
         return cosim.simulate(stop_time, inputs, progress=progress)
+
+
+#: Parameters that name one physical quantity of the machine wherever a component
+#: declares them (the cylinder's stroke is the boom's stroke): they must agree.
+SHARED = ("L", "A_a", "A_b", "V_a0", "V_b0", "a", "b", "h", "l_min", "P_atm")
+
+
+def check_shared(structure: SystemStructure, instances: Mapping[str, FmuInstance]) -> None:
+    """Raise :class:`SspError` where two components hold different values of one of
+    :data:`SHARED` (bound, or else the FMU's start value)."""
+    for name in SHARED:
+        seen: dict[str, float] = {}
+        for comp, inst in instances.items():
+            var = inst.variables.get(name)
+            if var is None or var.causality != "parameter":
+                continue
+            bound = structure.parameters.get(f"{comp}.{name}")
+            seen[comp] = float(bound.value if bound is not None else var.start)
+        if len(set(seen.values())) > 1:
+            listed = ", ".join(f"{c}.{name} = {v:g}" for c, v in seen.items())
+            raise SspError(f"{name} is one quantity of the machine but the components disagree: {listed}; "
+                           f"set every one of them")
 
 
 def _as_list(parameters) -> list:
