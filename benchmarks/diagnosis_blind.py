@@ -37,7 +37,7 @@ LOAD = ("K_v", "F_s", "F_d", "F_L", "M")
 
 def draw_case(i: int, seed: int):
     from boomfmi.physics import reference_rig as rig
-    from boomfmi.rig.plant import EFFECT_RANGES
+    from boomfmi.rig.config import EFFECT_RANGES
     rng = np.random.default_rng(seed * 1000 + i)
     params = {k: float(getattr(rig, k) * rng.uniform(0.85, 1.15)) for k in LOAD}
     params["F_s"] = max(params["F_s"], 1.05 * params["F_d"])

@@ -78,7 +78,8 @@ def test_a_recording_without_motion_gets_a_report_not_a_crash(tmp_path):
     t = [round(k * 1e-3, 6) for k in range(2000)]
     still = pd.DataFrame({"t": t, "u": 5.0, "p_a": 0.0, "p_b": 0.0, "alpha": 0.6342})
     write_recording(tmp_path / "still.csv", still)
-    proc = run(tmp_path / "still.csv", "--holdout", tmp_path / "still.csv", "--out", tmp_path / "o", cwd=tmp_path)
+    write_recording(tmp_path / "still_too.csv", still.assign(alpha=0.6350))     # another still run
+    proc = run(tmp_path / "still.csv", "--holdout", tmp_path / "still_too.csv", "--out", tmp_path / "o", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     doc = json.loads((tmp_path / "o" / "diagnosis.json").read_text())
     assert doc["judgeable"] is False and "no motion" in doc["reason"] and doc["verdict"] == []

@@ -15,6 +15,9 @@ def test_every_kind_round_trips_at_the_fixed_size():
     assert len(cmd) == len(status) == len(sample) == p.DATAGRAM_SIZE == 112
     assert p.decode(cmd, KEY) == p.Command(7, 1.25, 3.5)
     assert p.decode(status, KEY) == p.StatusRequest(8, 1.5)
+    assert p.decode(p.encode_command(7, 1.25, 3.5, KEY, session=0xDEADBEEF), KEY).session == 0xDEADBEEF
+    assert p.decode(p.encode_status(8, 1.5, KEY, session=5), KEY).session == 5
+    assert p.decode(p.encode_sample(9, 0, 2.0, 5, 0, 0, 0, 0, 0, 7, 4, KEY, session=6), KEY).session == 6
     s = p.decode(sample, KEY)
     assert (s.seq, s.t, s.p_a, s.f_ext, s.echo, s.rejected) == (9, 2.0, 6e5, -12.5, 7, 4)
     assert s.failsafe and s.lockstep
@@ -40,9 +43,9 @@ def test_wrong_version_is_malformed_even_when_authenticated():
     import hashlib
     import hmac
     payload = bytearray(p.encode_command(1, 0.0, 5.0, KEY)[:p.PAYLOAD_SIZE])
-    payload[2] = 2
+    payload[2] = 1                                        # version 1: no sessions
     forged = bytes(payload) + hmac.new(KEY, bytes(payload), hashlib.sha256).digest()
-    with pytest.raises(p.Malformed, match="version 2"):
+    with pytest.raises(p.Malformed, match="version 1"):
         p.decode(forged, KEY)
 
 

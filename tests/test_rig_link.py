@@ -201,7 +201,9 @@ def test_rig_killed_mid_run_ends_with_a_clear_error_and_keeps_every_row(fmu, rig
     proc = subprocess.Popen([sys.executable, "-m", "boomfmi.cli", "record", "--rig", r.url, "--out", str(out),
                              "--fmu", str(fmu("hardware_bridge")), "--stop", "5", "--timeout", "0.02",
                              "--loss-budget", "10"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
     while not out.exists() or out.read_text().count("\n") < 500:
+        assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read() if proc.poll() else "slow"
         time.sleep(0.01)
     r.kill()
     _, err = proc.communicate(timeout=60)
@@ -241,7 +243,7 @@ def test_a_replayed_datagram_is_ignored(rig):
     client = RigClient("127.0.0.1", r.port, KEY.encode(), timeout=0.2)
     first = client.exchange(1.0, 0.0)
     assert first is not None and first.t == pytest.approx(1e-3)
-    replay = encode_command(client.seq, 0.0, 1.0, KEY.encode())       # the same bytes again
+    replay = encode_command(client.seq, 0.0, 1.0, KEY.encode(), session=client.session)   # the same bytes
     client.sock.sendto(replay, ("127.0.0.1", r.port))
     time.sleep(0.05)
     status = client.exchange(None, 0.0)
@@ -249,3 +251,38 @@ def test_a_replayed_datagram_is_ignored(rig):
     client.close()
     r.stop()
     assert r.count("replayed") == 1
+
+
+def test_a_command_replayed_from_another_port_is_refused(rig):
+    """Replay protection is per session, not per sender port (issue 15)."""
+    import socket
+    r = rig()
+    client = RigClient("127.0.0.1", r.port, KEY.encode(), timeout=0.2)
+    assert client.exchange(1.0, 0.0).t == pytest.approx(1e-3)
+    captured = encode_command(client.seq, 0.0, 1.0, KEY.encode(), session=client.session)
+    other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)        # an attacker's new port
+    other.sendto(captured, ("127.0.0.1", r.port))
+    other.sendto(encode_command(client.seq + 5, 7.0, 9.0, KEY.encode()), ("127.0.0.1", r.port))  # no session
+    other.close()
+    time.sleep(0.05)
+    assert client.exchange(None, 0.0).t == pytest.approx(1e-3)     # the rig did not step again
+    client.close()
+    r.stop()
+    assert r.count("replayed") == 1 and r.count("of no open session") == 1
+
+
+def test_a_rig_killed_mid_record_leaves_its_rows_marked_incomplete(fmu, rig, tmp_path):
+    import json
+    import threading
+    from boomfmi.identify import identify_recordings
+    r = rig()
+    out = tmp_path / "run.csv"
+    threading.Timer(0.5, r.kill).start()
+    with pytest.raises(FmuError, match="lost"):
+        record_experiment(fmu("hardware_bridge"), r.url, out, timeout=0.02, loss_budget=5)
+    side = json.loads(out.with_suffix(".json").read_text())
+    assert side["incomplete"].startswith("the link failed at t = ")
+    rec = read_recording(out)
+    assert len(rec.data) > 10 and rec.incomplete
+    with pytest.raises(ValueError, match="marked incomplete"):
+        identify_recordings([out])

@@ -12,10 +12,12 @@ import pytest
 
 from boomfmi import physics as ph
 from boomfmi.experiments import paper_multistep
-from boomfmi.physics import rig_truth as rt
-from boomfmi.reference import Model, simulate_reference
+from boomfmi.model import Model
+from boomfmi.model.reference import simulate_reference
 from boomfmi.rig import RigConfig, Sample, VirtualRig, load_config
-from boomfmi.rig.plant import ALPHA_LSB, EFFECTS, P_LSB
+from boomfmi.rig import truth as rt
+from boomfmi.rig.config import EFFECTS
+from boomfmi.rig.plant import ALPHA_LSB, P_LSB
 
 ROOT = Path(__file__).resolve().parents[1]
 QUIET = {"p_sigma": 0.0, "alpha_sigma": 0.0, "quantise": False}
@@ -287,7 +289,7 @@ def test_example_configs_load():
         assert math.isfinite(rig.truth["x"])
 
 
-# ----------------------------------------------------------- rig_truth forms
+# --------------------------------------------------------------- truth forms
 @pytest.mark.parametrize("zeta", [0.5, 0.7, 1.0, 1.5])
 def test_spool_transition_is_exact(zeta):
     from scipy.integrate import solve_ivp

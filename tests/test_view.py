@@ -29,6 +29,7 @@ from boomfmi.view.frames import live_frame, load_run
 
 ROOT = Path(__file__).resolve().parents[1]
 ARTIFACTS = ROOT / "build" / "test-artifacts"
+KEY = b"view-test-key-0123456789abcdef"       # the link key that signs and checks the live stream
 
 
 @pytest.fixture(scope="module")
@@ -98,7 +99,7 @@ def test_live_sender_reaches_the_hub_as_frames():
     from boomfmi.view.server import LiveHub
 
     async def go():
-        hub = LiveHub("udp://127.0.0.1:0")
+        hub = LiveHub("udp://127.0.0.1:0", KEY)
         loop = asyncio.get_running_loop()
         transport, _ = await loop.create_datagram_endpoint(lambda: hub, local_addr=("127.0.0.1", 0))
         port = transport.get_extra_info("sockname")[1]
@@ -109,7 +110,8 @@ def test_live_sender_reaches_the_hub_as_frames():
                              "p_a": ("cylinder.p_a", -reference_rig.P_atm), "p_b": ("cylinder.p_b", -reference_rig.P_atm),
                              "alpha_measured": ("hardware_bridge.alpha", 0.0),
                              "p_a_measured": ("hardware_bridge.p_a", 0.0), "f_est": ("force_estimator.f_est", 0.0)},
-                            [reference_rig.a, reference_rig.b, reference_rig.h, reference_rig.l_min], rate=1e6)
+                            [reference_rig.a, reference_rig.b, reference_rig.h, reference_rig.l_min], rate=1e6,
+                            key=KEY)
         sender(names, np.array([1.25, 0.80, 0.03, reference_rig.P_atm + 2e5, reference_rig.P_atm + 1e5, 0.75, 1.5e5, -320.0]))
         for _ in range(100):
             if hub.history:
@@ -167,9 +169,9 @@ def _free_port() -> int:
 class View:
     """``boomfmi view`` in a subprocess."""
 
-    def __init__(self, *args: str, port: int = 0):
+    def __init__(self, *args: str, port: int = 0, env: dict | None = None):
         self.proc = subprocess.Popen([sys.executable, "-m", "boomfmi.cli", "view", *args, "--port", str(port)],
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
         line = self.proc.stdout.readline()
         m = re.search(r"(http://127\.0\.0\.1:(\d+)/)", line)
         assert m, line + self.proc.stderr.read()
@@ -277,13 +279,17 @@ def test_the_page_reconnects_after_its_websocket_drops(contact_run, driver):
 def test_live_view_beside_a_running_teleoperation(contact_run, ssp_path, driver, tmp_path):
     rec = contact_run.parent / "reference_rig.csv"
     udp = _free_port()
-    view = View("--live", f"udp://127.0.0.1:{udp}")
+    key_file = tmp_path / "link.key"                 # the view checks with a key file, simulate signs from the env
+    key_file.write_bytes(KEY)
+    view = View("--live", f"udp://127.0.0.1:{udp}", "--key-file", str(key_file),
+                env={k: v for k, v in os.environ.items() if k != "BOOMFMI_LINK_KEY"})
     try:
         driver.get(view.url)
         _wait(driver, "return window.boomView.connected && window.boomView.mode === 'live'")
         sim = subprocess.run([sys.executable, "-m", "boomfmi.cli", "simulate", str(ssp_path.parent / "teleoperation.ssp"),
                               "--experiment", str(rec), "--replay", "--view", f"udp://127.0.0.1:{udp}",
-                              "--out", str(tmp_path / "live.csv")], capture_output=True, text=True, timeout=120)
+                              "--out", str(tmp_path / "live.csv")], capture_output=True, text=True, timeout=120,
+                             env={**os.environ, "BOOMFMI_LINK_KEY": KEY.decode()})
         assert sim.returncode == 0, sim.stderr
         s = _wait(driver, "return window.boomView.framesReceived > 20 && window.boomView.state()")
         assert s["ghostVisible"] and s["machineVisible"]

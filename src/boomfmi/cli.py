@@ -98,6 +98,8 @@ def _value(text: str):
 
 def _simulate(args) -> int:
     from .simulate import run_experiment
+    if args.out.is_dir():
+        raise IsADirectoryError(f"{args.out}: Is a directory; --out names the CSV file to write")
     given = {}
     for item in args.set:
         name, eq, value = item.partition("=")
@@ -112,11 +114,16 @@ def _simulate(args) -> int:
         given = {**replay_parameters(args.experiment), **given}
     if args.rig:
         given.update({"hardware_bridge.mode": "udp", "hardware_bridge.rig": args.rig})
+    view_key = _view_key(args.key_file, "--view", "the stream") if args.view else None
+    if args.key_file and not args.view:
+        raise ValueError("--key-file signs the --view stream: give --view too (the hardware bridge's key: "
+                         "--set hardware_bridge.key_file=K or $BOOMFMI_LINK_KEY)")
     result = run_experiment(args.ssp, args.experiment, args.step, args.stop, args.algorithm,
                             [*args.params, given] if given else args.params, progress=True,
-                            view=args.view)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    result.to_csv(args.out, index=False, float_format="%.10g")
+                            view=args.view, view_key=view_key)
+    from .outputs import OutputSet
+    with OutputSet(args.out.parent) as files:          # an interrupt leaves the old file whole
+        result.to_csv(files.path(args.out.name), index=False, float_format="%.10g")
     last = result.iloc[-1]
     print(f"wrote {args.out}: {len(result)} rows, t = {result.t.iloc[0]:g} to {last.t:g} s; "
           f"at the end x = {1000 * last.x:.2f} mm, p_a = {last.p_a / 1e5:.3f} bar, "
@@ -124,7 +131,23 @@ def _simulate(args) -> int:
     return 0
 
 
+def _view_key(key_file, option: str, what: str) -> bytes:
+    """The link key that signs (``simulate --view``) or checks (``view --live``) the
+    live stream; LinkError naming the options when there is none."""
+    import os
+    from .link.protocol import KEY_ENV, load_key
+    if not key_file and not os.environ.get(KEY_ENV):
+        raise LinkError(f"no link key: {option} authenticates {what} with the rig link's key; give "
+                        f"--key-file K or set ${KEY_ENV} (the live view does not run unauthenticated)")
+    try:
+        return load_key(key_file)
+    except LinkError as e:
+        raise LinkError(f"{option}: {e}") from None
+
+
 def _view(args) -> int:
+    if args.key_file and not args.live:
+        raise ValueError("--key-file checks the --live stream: give --live udp://HOST:PORT")
     if args.export:
         if not args.replay:
             raise ValueError("--export renders a run file: give --replay RUN.csv")
@@ -139,7 +162,8 @@ def _view(args) -> int:
         what = f"replaying {args.replay}" if args.replay else f"live from {args.live}"
         print(f"view on {url} ({what}); Ctrl-C stops it", flush=True)
 
-    serve(args.replay, args.live, args.host, args.port, ready)
+    key = _view_key(args.key_file, "--live", "the stream") if args.live else None
+    serve(args.replay, args.live, args.host, args.port, ready, key=key, origins=args.allow_origin)
     return 0
 
 
@@ -233,7 +257,10 @@ def main(argv=None) -> int:
                                     "(a lockstep or real-time `boomfmi rig serve`)")
     p.add_argument("--algorithm", choices=("gauss-seidel", "jacobi"), default="gauss-seidel")
     p.add_argument("--view", metavar="udp://HOST:PORT",
-                   help="stream the run to `boomfmi view --live` listening there (60 samples per second)")
+                   help="stream the run to `boomfmi view --live` listening there (60 samples per second), "
+                        "signed with the link key")
+    p.add_argument("--key-file", help="--view: file holding the shared link key that signs the stream "
+                                      "(default: $BOOMFMI_LINK_KEY)")
     p.add_argument("--out", type=Path, required=True, help="output CSV (recording columns plus x, v)")
     p.set_defaults(run=_simulate)
     p = sub.add_parser("rig", help="the virtual rig")
@@ -287,9 +314,15 @@ def main(argv=None) -> int:
     source.add_argument("--replay", type=Path, metavar="RUN.csv",
                         help="a recording, or a teleoperation run from `boomfmi simulate` (model beside machine)")
     source.add_argument("--live", metavar="udp://HOST:PORT",
-                        help="listen there for a co-simulation's samples (`boomfmi simulate --view`)")
+                        help="listen there for a co-simulation's samples (`boomfmi simulate --view`, "
+                             "signed with the same link key)")
+    p.add_argument("--key-file", help="--live: file holding the shared link key that checks the stream "
+                                      "(default: $BOOMFMI_LINK_KEY)")
+    p.add_argument("--allow-origin", action="append", default=[], metavar="http://HOST:PORT",
+                   help="also serve pages of this origin (and requests naming HOST:PORT), e.g. through a "
+                        "tunnel or another address; by default only 127.0.0.1, localhost and [::1] at --port")
     p.add_argument("--host", default="127.0.0.1", help="address of the page (default: loopback only)")
-    p.add_argument("--port", type=int, default=8765, help="port of the page (0: any free port, printed)")
+    p.add_argument("--port", type=_port, default=8765, help="port of the page (0: any free port, printed)")
     p.add_argument("--export", type=Path, metavar="OUT.mp4|OUT.gif",
                    help="render the replay to a video instead of serving the page")
     p.add_argument("--fps", type=float, default=25.0, help="--export: frames per second (default 25)")

@@ -118,9 +118,11 @@ def max_stable_step(cosim) -> float:
 
 def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
                    stop_time: float | None = None, algorithm: str = "gauss-seidel",
-                   parameters=None, progress: bool = False, view: str | None = None) -> pd.DataFrame:
+                   parameters=None, progress: bool = False, view: str | None = None,
+                   view_key: bytes | None = None) -> pd.DataFrame:
     """Simulate ``experiment`` on the SSP; return recording columns plus x and v.
-    ``view`` (udp://HOST:PORT) streams the run to ``boomfmi view --live`` as it goes."""
+    ``view`` (udp://HOST:PORT) streams the run to ``boomfmi view --live`` as it goes,
+    signed with ``view_key`` (by default ``link.protocol.load_key()``'s: $BOOMFMI_LINK_KEY)."""
     if experiment not in PROFILES and Path(experiment).suffix.lower() != ".csv" \
             and not Path(experiment).exists():
         raise ValueError(f"unknown experiment {experiment!r}: give one of {', '.join(PROFILES)} "
@@ -149,7 +151,7 @@ def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
         if view:
             from .view.live import LiveSender
             geom = [bound_value(cosim, g) for g in ("a", "b", "h", "l_min")]
-            sender = LiveSender(view, live_columns(cosim, bridges, P_atm), geom)
+            sender = LiveSender(view, live_columns(cosim, bridges, P_atm), geom, key=view_key)
         try:
             result = cosim.simulate(stop_time if stop_time is not None else duration, inputs,
                                     progress=progress, monitor=sender)

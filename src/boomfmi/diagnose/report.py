@@ -42,10 +42,10 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
     fit_recs = [read_recording(p) for p in fit_paths]
     hold_recs = [read_recording(p) for p in hold_paths]
     for r in fit_recs + hold_recs:
-        check_plausible(r)
         if r.incomplete:
             raise ValueError(f"{r.path}: the recording is marked incomplete in its sidecar ({r.incomplete}); "
                              f"record it again")
+        check_plausible(r)
     for h in hold_recs:
         check_distinct(fit_recs, h)
     rigs = {json.dumps(r.rig, sort_keys=True) for r in fit_recs + hold_recs}

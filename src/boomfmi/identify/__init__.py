@@ -33,10 +33,10 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
         raise ValueError(f"unknown method {method!r}: 'paper' or 'fit'")
     recs = [read_recording(p) for p in paths]
     for r in recs:
-        check_plausible(r)
         if r.incomplete:
             raise ValueError(f"{r.path}: the recording is marked incomplete in its sidecar ({r.incomplete}); "
                              f"record it again")
+        check_plausible(r)
     rigs = {json.dumps(r.rig, sort_keys=True) for r in recs}
     if len(rigs) > 1:
         raise ValueError("the recordings come from different rigs (their sidecars' 'rig' values differ): "

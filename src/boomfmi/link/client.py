@@ -49,6 +49,7 @@ class RigClient:
         self.sock.setblocking(False)
         self.seq = int(time.time() * 1000) & 0x3FFFFFFF     # fresh start above old sessions
         self.guard = SequenceGuard()
+        self.session = 0          #: the rig's session number, from the first answer
         self.dropped = {"malformed": 0, "auth": 0, "stale": 0, "replay": 0}
 
     def _send(self, datagram: bytes) -> None:
@@ -60,11 +61,27 @@ class RigClient:
     def exchange(self, u: float | None, t: float, dt: float = 1e-3) -> SampleDatagram | None:
         """Send a command (``u`` for the step from ``t`` to ``t + dt``) or, with
         ``u=None``, a status request; return the rig's answer, or None when none arrives
-        within the timeout."""
+        within the timeout.  The first exchange opens a session (a status request of
+        session 0) before a command can be sent."""
+        deadline = time.perf_counter() + self.timeout
+        if not self.session:
+            self.seq += 1
+            self._send(encode_status(self.seq, t, self.key, 0))
+            opened = self._answer(self.seq, deadline)
+            if opened is None or not opened.session:
+                return None
+            self.session = opened.session
+            if u is None:
+                return opened
         self.seq += 1
         seq = self.seq
-        self._send(encode_status(seq, t, self.key) if u is None else encode_command(seq, t, u, self.key, dt))
-        deadline = time.perf_counter() + self.timeout
+        self._send(encode_status(seq, t, self.key, self.session) if u is None
+                   else encode_command(seq, t, u, self.key, dt, self.session))
+        return self._answer(seq, deadline)
+
+    def _answer(self, seq: int, deadline: float) -> SampleDatagram | None:
+        """The rig's answer to ``seq`` (authentic, of this session, not a replay), or None
+        at ``deadline``."""
         while True:
             remaining = deadline - time.perf_counter()
             if remaining <= 0:
@@ -90,7 +107,7 @@ class RigClient:
             if not isinstance(msg, SampleDatagram):
                 self.dropped["malformed"] += 1
                 continue
-            if msg.echo != seq:
+            if msg.echo != seq or (self.session and msg.session != self.session):
                 self.dropped["stale"] += 1
                 continue
             if not self.guard.accept(msg.seq):

@@ -1,4 +1,4 @@
-"""The rig link protocol, version 1.
+"""The rig link protocol, version 2.
 
 Every datagram is exactly ``DATAGRAM_SIZE`` = 112 bytes: an 80-byte payload and its
 HMAC-SHA256 (32 bytes) under a shared key.  Integers and floats are little-endian.
@@ -13,15 +13,26 @@ Payload header (20 bytes), then the body, zero-padded to 80 bytes::
     t       f64 commands: the sender's time [s]; samples: the rig's sample time [s]
 
     command body:  u f64 (valve command [V]), dt f64 (the step it is for [s]: a lockstep
-                   rig advances by dt, once per distinct t)
-    status body:   (none; asks for the current sample without stepping a lockstep rig)
+                   rig advances by dt, once per distinct t), session u32
+    status body:   session u32 (asks for the current sample without stepping a lockstep
+                   rig; session 0 opens a new session)
     sample body:   u_applied, p_a, p_b, alpha, f_ext, x (f64 each: V, Pa gauge, Pa gauge,
                    rad, N, m), echo u32 (the seq of the command or status request this
-                   answers), rejected u32 (datagrams the rig has ignored so far)
+                   answers), rejected u32 (datagrams the rig has ignored so far), session
+                   u32 (the session the answer belongs to)
+
+Sessions.  A client opens a session with a status request of session 0; the rig draws a
+random session number, answers with it, and from then on accepts from that session
+only sequence numbers above the last it accepted in it, whatever address or port they
+come from.  A command of session 0, or of a session the rig does not know (it keeps
+the :data:`MAX_SESSIONS` latest), is refused.  So a captured datagram replayed from
+another port is refused as a replay, and one replayed after its session has been
+forgotten as of an unknown session; forging a datagram of a new session needs the key.
 
 A receiver drops, and counts, a datagram of the wrong size, magic or version
 (malformed), one whose MAC does not verify (authentication), and one whose sequence
-number is not above the last accepted from that peer (replay).
+number is not above the last accepted in its session (replay) or whose session is
+unknown.
 """
 from __future__ import annotations
 
@@ -34,7 +45,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 MAGIC = b"BF"
-VERSION = 1
+VERSION = 2
 PAYLOAD_SIZE = 80
 MAC_SIZE = 32
 DATAGRAM_SIZE = PAYLOAD_SIZE + MAC_SIZE
@@ -42,10 +53,13 @@ COMMAND, SAMPLE, STATUS = 1, 2, 3
 FAILSAFE, LOCKSTEP = 1, 2
 KEY_ENV = "BOOMFMI_LINK_KEY"
 MIN_KEY_BYTES = 16
+#: Sessions a rig keeps (the latest opened); an older one's datagrams are refused.
+MAX_SESSIONS = 64
 
 _HEADER = struct.Struct("<2sBBIId")
-_COMMAND = struct.Struct("<2sBBIIddd")
-_SAMPLE = struct.Struct("<2sBBIId6dII")
+_COMMAND = struct.Struct("<2sBBIIdddI")
+_STATUS = struct.Struct("<2sBBIIdI")
+_SAMPLE = struct.Struct("<2sBBIId6dIII")
 
 
 class LinkError(Exception):
@@ -65,11 +79,13 @@ class Command(NamedTuple):
     t: float
     u: float
     dt: float = 1e-3
+    session: int = 0
 
 
 class StatusRequest(NamedTuple):
     seq: int
     t: float
+    session: int = 0
 
 
 class SampleDatagram(NamedTuple):
@@ -86,6 +102,7 @@ class SampleDatagram(NamedTuple):
     x: float
     echo: int
     rejected: int
+    session: int = 0
 
     @property
     def failsafe(self) -> bool:
@@ -126,18 +143,19 @@ def _seal(payload: bytes, key: bytes) -> bytes:
     return payload + hmac.new(key, payload, hashlib.sha256).digest()
 
 
-def encode_command(seq: int, t: float, u: float, key: bytes, dt: float = 1e-3) -> bytes:
-    return _seal(_COMMAND.pack(MAGIC, VERSION, COMMAND, seq, 0, t, u, dt), key)
+def encode_command(seq: int, t: float, u: float, key: bytes, dt: float = 1e-3, session: int = 0) -> bytes:
+    return _seal(_COMMAND.pack(MAGIC, VERSION, COMMAND, seq, 0, t, u, dt, session), key)
 
 
-def encode_status(seq: int, t: float, key: bytes) -> bytes:
-    return _seal(_HEADER.pack(MAGIC, VERSION, STATUS, seq, 0, t), key)
+def encode_status(seq: int, t: float, key: bytes, session: int = 0) -> bytes:
+    return _seal(_STATUS.pack(MAGIC, VERSION, STATUS, seq, 0, t, session), key)
 
 
 def encode_sample(seq: int, flags: int, t: float, u_applied: float, p_a: float, p_b: float,
-                  alpha: float, f_ext: float, x: float, echo: int, rejected: int, key: bytes) -> bytes:
+                  alpha: float, f_ext: float, x: float, echo: int, rejected: int, key: bytes,
+                  session: int = 0) -> bytes:
     return _seal(_SAMPLE.pack(MAGIC, VERSION, SAMPLE, seq, flags, t, u_applied, p_a, p_b,
-                              alpha, f_ext, x, echo & 0xFFFFFFFF, rejected & 0xFFFFFFFF), key)
+                              alpha, f_ext, x, echo & 0xFFFFFFFF, rejected & 0xFFFFFFFF, session), key)
 
 
 def decode(datagram: bytes, key: bytes):
@@ -152,12 +170,12 @@ def decode(datagram: bytes, key: bytes):
     if magic != MAGIC or version != VERSION:
         raise Malformed(f"magic {magic!r} version {version}")
     if kind == COMMAND:
-        u, dt = _COMMAND.unpack_from(payload)[6:8]
+        u, dt, session = _COMMAND.unpack_from(payload)[6:9]
         if not (math.isfinite(u) and math.isfinite(dt) and 0.0 < dt <= 1.0):
             raise Malformed("a command whose u or dt is not a finite number (dt in (0, 1] s)")
-        return Command(seq, t, u, dt)
+        return Command(seq, t, u, dt, session)
     if kind == STATUS:
-        return StatusRequest(seq, t)
+        return StatusRequest(seq, t, _STATUS.unpack_from(payload)[6])
     if kind == SAMPLE:
         f = _SAMPLE.unpack_from(payload)
         return SampleDatagram(seq, flags, *f[5:])
@@ -165,7 +183,8 @@ def decode(datagram: bytes, key: bytes):
 
 
 class SequenceGuard:
-    """Accepts strictly increasing sequence numbers; counts what it refuses."""
+    """Accepts strictly increasing sequence numbers (of one session); counts what it
+    refuses."""
 
     def __init__(self):
         self.last = -1

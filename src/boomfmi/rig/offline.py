@@ -11,7 +11,8 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from .plant import VirtualRig, load_config
+from .config import load_config
+from .plant import VirtualRig
 
 
 def run_offline(config, command: Callable[[float], dict], duration: float, dt: float = 1e-3) -> pd.DataFrame:

@@ -10,10 +10,12 @@
   latest sample at once;
 * a **status request** is answered with the current sample without stepping.
 
-Datagrams that are malformed, fail authentication or repeat an old sequence number
-(per sender) are ignored and counted.  **Watchdog**: when no valid command has arrived
-for ``watchdog`` seconds (50 ms by default, wall clock) the rig centres the valve (5 V)
-and reports the fail-safe state in every sample until commands resume.
+Datagrams that are malformed, fail authentication, belong to no open session or repeat
+an old sequence number of their session (link protocol version 2: replay protection per
+session, whatever port a datagram comes from) are ignored and counted.  **Watchdog**:
+when no valid command has arrived for ``watchdog`` seconds (50 ms by default, wall
+clock) the rig centres the valve (5 V) and reports the fail-safe state in every sample
+until commands resume.
 
 With ``record`` the rig writes every sample it measures in the recording format, plus
 ``f_ext`` (the true external force), ``x`` (the true position) and ``failsafe``, row by
@@ -26,15 +28,17 @@ from __future__ import annotations
 import ctypes
 import gc
 import os
+import secrets
 import select
 import signal
 import socket
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
-from ..link.protocol import (FAILSAFE, LOCKSTEP, BadMac, Command, Malformed, SequenceGuard,
-                             StatusRequest, decode, encode_sample)
-from ..physics import reference_rig as rig
+from ..link.protocol import (FAILSAFE, LOCKSTEP, MAX_SESSIONS, BadMac, Command, Malformed,
+                             SequenceGuard, StatusRequest, decode, encode_sample)
+from ..physics import reference_rig
 from ..recording import RecordingWriter
 
 MCL_CURRENT, MCL_FUTURE = 1, 2          # <sys/mman.h> on Linux
@@ -48,19 +52,21 @@ class Counters:
     rejected_malformed: int = 0
     rejected_auth: int = 0
     rejected_replay: int = 0
+    rejected_session: int = 0
     failsafe_entries: int = 0
     missed_ticks: int = 0
-    peers: dict = field(default_factory=dict)
+    #: session number -> its SequenceGuard, the latest MAX_SESSIONS opened
+    sessions: OrderedDict = field(default_factory=OrderedDict)
 
     @property
     def rejected(self) -> int:
-        return self.rejected_malformed + self.rejected_auth + self.rejected_replay
+        return self.rejected_malformed + self.rejected_auth + self.rejected_replay + self.rejected_session
 
     def summary(self) -> str:
-        return (f"{self.commands} commands, {self.status} status requests; ignored "
-                f"{self.rejected_malformed} malformed, {self.rejected_auth} unauthenticated, "
-                f"{self.rejected_replay} replayed; fail-safe entered {self.failsafe_entries} times; "
-                f"{self.missed_ticks} ticks missed")
+        return (f"{self.commands} commands, {self.status} status requests, {len(self.sessions)} sessions; "
+                f"ignored {self.rejected_malformed} malformed, {self.rejected_auth} unauthenticated, "
+                f"{self.rejected_replay} replayed, {self.rejected_session} of no open session; "
+                f"fail-safe entered {self.failsafe_entries} times; {self.missed_ticks} ticks missed")
 
 
 class RigServer:
@@ -73,9 +79,9 @@ class RigServer:
         self.sock.setblocking(False)
         self.port = self.sock.getsockname()[1]
         self.counters = Counters()
-        self.u_cmd = rig.u_centre
+        self.u_cmd = reference_rig.u_centre
         self.last_command_wall = time.perf_counter()
-        self.last_command_t: dict = {}           # per sender: the time of its last command
+        self.last_command_t: dict = {}           # per session: the time of its last command
         self.failsafe = False
         self.seq = 0
         self.sample = plant.measure()
@@ -94,18 +100,18 @@ class RigServer:
 
     def _advance(self, dt: float | None = None) -> None:
         """Record the current sample with the command applied from now, then step."""
-        u = rig.u_centre if self.failsafe else self.u_cmd
+        u = reference_rig.u_centre if self.failsafe else self.u_cmd
         self._record(self.sample, u)
         self.sample = self.plant.step(u, dt or self.dt)
 
     # -- the link ----------------------------------------------------------------------------
-    def _reply(self, addr, echo: int) -> None:
+    def _reply(self, addr, echo: int, session: int) -> None:
         s = self.sample
         self.seq += 1
         flags = (FAILSAFE if self.failsafe else 0) | (LOCKSTEP if self.lockstep else 0)
         try:
             self.sock.sendto(encode_sample(self.seq, flags, s.t, s.u_applied, s.p_a, s.p_b, s.alpha,
-                                           s.f_ext, s.x, echo, self.counters.rejected, self.key), addr)
+                                           s.f_ext, s.x, echo, self.counters.rejected, self.key, session), addr)
         except OSError:
             pass
 
@@ -122,24 +128,36 @@ class RigServer:
         if not isinstance(msg, (Command, StatusRequest)):
             c.rejected_malformed += 1
             return
-        guard = c.peers.setdefault(addr, SequenceGuard())
+        session = msg.session
+        if isinstance(msg, StatusRequest) and session == 0:       # opens a session
+            session = secrets.randbits(32) or 1
+            while session in c.sessions:
+                session = secrets.randbits(32) or 1
+            c.sessions[session] = SequenceGuard()
+            while len(c.sessions) > MAX_SESSIONS:
+                forgotten, _ = c.sessions.popitem(last=False)
+                self.last_command_t.pop(forgotten, None)
+        guard = c.sessions.get(session)
+        if guard is None:
+            c.rejected_session += 1
+            return
         if not guard.accept(msg.seq):
             c.rejected_replay += 1
             return
         if isinstance(msg, StatusRequest):
             c.status += 1
-            self._reply(addr, msg.seq)
+            self._reply(addr, msg.seq, session)
             return
         c.commands += 1
-        self.u_cmd = min(max(msg.u, rig.u_min), rig.u_max)
+        self.u_cmd = min(max(msg.u, reference_rig.u_min), reference_rig.u_max)
         self.last_command_wall = time.perf_counter()
         self.failsafe = False
         if self.lockstep:
-            last = self.last_command_t.get(addr)
+            last = self.last_command_t.get(session)
             if last is None or abs(msg.t - last) > 0.5 * msg.dt:     # not a retry of the last one
                 self._advance(msg.dt)
-                self.last_command_t[addr] = msg.t
-        self._reply(addr, msg.seq)
+                self.last_command_t[session] = msg.t
+        self._reply(addr, msg.seq, session)
 
     def _drain(self) -> None:
         while True:
@@ -189,7 +207,7 @@ class RigServer:
 
     def close(self) -> None:
         if self.writer:
-            self._record(self.sample, rig.u_centre if self.failsafe else self.u_cmd)
+            self._record(self.sample, reference_rig.u_centre if self.failsafe else self.u_cmd)
             self.writer.close()
             self.writer = None
         self.sock.close()

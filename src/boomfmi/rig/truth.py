@@ -1,8 +1,8 @@
 """The virtual rig's unmodelled effects: what the "real" machine does beyond the paper.
 
 The virtual rig (``boomfmi.rig``) simulates the paper's model (Eq. 1 to 12, through
-the functions of this package) plus the effects named in ``shared/spec/effects.md``,
-each switchable.  The forms here are deliberately *not* the simple candidate forms a
+``boomfmi.physics``) plus the effects named in ``shared/spec/effects.md``, each
+switchable.  The forms here are deliberately *not* the simple candidate forms a
 diagnosis would try first (first-order spool lag, a sharp deadband, a polytropic
 exponent, a laminar leak conductance, an exponential Stribeck curve, a first-order
 sensor lag): the rig must not be a perfect-model test for the diagnosis.  Every form
@@ -101,9 +101,9 @@ from __future__ import annotations
 
 import math
 
-from .orifice import signed_mass_flow, signed_mass_flow_slope
-from . import reference_rig as _rig
-from .params import Cylinder, Gas, Load
+from ..physics import reference_rig
+from ..physics.orifice import signed_mass_flow, signed_mass_flow_slope
+from ..physics.params import Cylinder, Gas, Load
 
 
 # --------------------------------------------------------------------------- valve
@@ -219,7 +219,7 @@ def stribeck_load(load: Load, v: float, F_brk: float, v_s: float) -> Load:
 
 # ------------------------------------------------------------------ heat transfer
 def chamber_wall_areas(x: float, A_w0: float, cyl: Cylinder = Cylinder(),
-                       bore: float = _rig.bore, rod: float = _rig.rod):
+                       bore: float = reference_rig.bore, rod: float = reference_rig.rod):
     """Wall areas [m^2] of chambers A and B at piston position ``x`` [m]: the dead
     volume's ``A_w0`` [m^2] plus both end faces plus the swept barrel (and, in B, the
     rod): ``A_w0 + 2 A_a + pi bore x`` and ``A_w0 + 2 A_b + pi (bore + rod) (L - x)``."""

@@ -1,0 +1,321 @@
+"""The virtual rig's configuration: :class:`RigConfig`, checked by :func:`load_config`.
+
+A configuration (a JSON file in ``examples/rig/``, a dict, or a :class:`RigConfig`)
+switches on the unmodelled effects of ``shared/spec/effects.md``, sets the sensors'
+noise, overrides model parameters, and adds a contact with the ground or a
+disturbance; :class:`boomfmi.rig.plant.VirtualRig` simulates it.
+
+Effects (``RigConfig.effects``: name -> parameters; absent = off; ``{}`` or ``true`` =
+the defaults).  Forms in :mod:`boomfmi.rig.truth`:
+
+=================== ======== ============================== ========= ===============
+effect              name     meaning [unit]                  default   realistic range
+=================== ======== ============================== ========= ===============
+valve_dynamics      f_n      spool natural frequency [Hz]    100       60 .. 150
+                    zeta     spool damping ratio [1]         0.7       0.5 .. 0.9
+valve_deadband      overlap  dead band half-width [V]        0.4       0.2 .. 0.6
+                    edge     rounded-edge half-width [V]     0.15      0.05 .. 0.3
+heat_transfer       h_w      wall coefficient [W/(m^2 K)]    40        10 .. 150
+                    A_w0     dead-volume wall area [m^2]     0.01      0.003 .. 0.03
+                    T_s      supply air temperature [K]      293.15    283 .. 313
+piston_leakage      A_leak   seal leak orifice area [m^2]    2e-8      1e-8 .. 5e-8
+stribeck_friction   v_s      Stribeck velocity [m/s]         0.01      0.002 .. 0.03
+                    F_brk    breakaway force [N]             140       F_d .. 250
+end_cushioning      l_c      cushion length [m]              0.012     0.005 .. 0.015
+                    A_n      needle-valve area [m^2]         5e-8      2e-8 .. 3e-7
+                    w        spigot entry chamfer [m]        0.001     0.0005 .. 0.003
+sensor_lag          delay    transport delay [s]             0.003     0.001 .. 0.005
+                    tau      first-order time constant [s]   0.005     0.002 .. 0.010
+=================== ======== ============================== ========= ===============
+
+What each does with its defaults (from rest at x = 0, noise off; the tests check each
+direction):
+
+* valve_dynamics: second-order spool ``y'' + 2 zeta w y' + w^2 y = w^2 u``
+  (w = 2 pi f_n), exact over each substep; area and routing follow y.  The spool
+  starts centred (5 V).  After a step to 1 V, p_a rises 3 kPa in the first ms
+  instead of 42 kPa.
+* valve_deadband: smooth overlap, zero opening for |y - 5| < overlap - edge, C1
+  quadratic over the edge, linear (rescaled to reach A_max at full command) beyond.
+  5.3 V or 4.7 V leave the piston where it is (the paper's valve moves it).
+* heat_transfer: a temperature per chamber (m and T states, P = m R T / V), supply air
+  entering at T_s, heat from the wall ``h_w A_wall(x) (T_wall - T)``, T_wall = params T.
+  Chamber B filled in 80 ms at the stop reaches about 370 K; with the valve closed its
+  pressure then falls from 6.0 to 4.5 bar gauge within a second as the air cools.
+* piston_leakage: the paper's compressible orifice law (Eq. 1) across the piston,
+  from the higher to the lower chamber pressure.  At the end of stroke with the valve
+  centred, p_b rises by about 3 bar and the piston sinks 8 mm in 2.5 s.
+* stribeck_friction: ``F_d + (F_brk - F_d) / (1 + (v/v_s)^2)`` times cos(phi), viscous
+  K_v v kept, the stick test at F_brk cos(phi).  At 4 V the piston breaks away 4 ms
+  later at 0.4 bar more; at speed, friction is back at F_d.
+* end_cushioning: over the last l_c of stroke the exhausting chamber's outflow passes
+  the needle A_n in series with the valve port (``1/A^2 = 1/A_v^2 + g/A_n^2``).  The
+  exhaust pressure peaks at about 0.7 bar gauge (extending) or 1 bar (retracting) at
+  the stroke end and the piston slows by 10 to 20 % in the last mm: the 15 cm^3 dead
+  volume on the cylinder side of the restriction limits the cushion's air spring.
+* sensor_lag: first-order filter (tau) then transport delay on p_a, p_b and alpha;
+  a ramp is recorded delay + tau = 8 ms late.
+
+Contact (``RigConfig.contact``), forces positive against extension:
+
+* ``{"type": "spring", "x_contact": m, "stiffness": N/m, "damping": N s/m}``: below
+  x_contact the ground pushes the piston out, ``f_ext = -(k (x_c - x) + c max(-v, 0))``;
+  soft soil about 2e4 N/m, hard ground about 5e5 N/m (damping defaults to 0).
+* ``{"type": "ramp", "start": s, "rate": N/s, "max": N, "sign": +1 | -1}``: a digging
+  load ``sign min(rate (t - start), max)`` after ``start`` (start defaults to 0, sign to
+  +1), independent of position.
+
+Disturbance (``RigConfig.disturbance``), outside the effects' vocabulary, for blind
+tests: ``{"type": "vibration", "amplitude": N, "frequency": Hz}``, a force
+``amplitude sin(2 pi frequency t)`` on the piston, added to ``f_ext``.
+
+Sensors (``RigConfig.noise``): Gaussian noise ``p_sigma`` [Pa] (default 500) on each
+pressure and ``alpha_sigma`` [rad] (default 2e-4) on the angle, then, with ``quantise``
+(default true), a 12-bit ADC: pressures over the SDE5-D10's 0 .. 10 bar gauge range
+(LSB = 1e6 / 4096 = 244.14 Pa; readings saturate at 0 and 999 756 Pa gauge), the angle
+over 0 .. pi rad (LSB = pi / 4096 = 7.67e-4 rad).  Noise comes from a NumPy Generator
+seeded with ``RigConfig.seed``: the same config and commands give the same samples.
+
+Model parameters (``RigConfig.params``) override the reference rig by the FMUs'
+parameter names: ``A_max, P_s, P_e, k, R, T, A_a, A_b, L, V_a0, V_b0, a, b, h, l_min,
+K_v, F_s, F_d, F_L, M, P_atm, p_a0, p_b0`` (pressures absolute [Pa]).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+
+from .. import physics as ph
+from ..physics import reference_rig
+
+#: Model parameters that ``RigConfig.params`` may override, with the reference values.
+PARAMETERS = {
+    **{name: getattr(reference_rig, name)
+       for name in ("A_max", "P_s", "P_e", "k", "R", "T", "A_a", "A_b", "L", "V_a0", "V_b0",
+                    "a", "b", "h", "l_min", "K_v", "F_s", "F_d", "F_L", "M", "P_atm")},
+    "p_a0": reference_rig.P_atm, "p_b0": reference_rig.P_atm,
+}
+
+#: Each effect's parameters and defaults (names exactly those of effects.md).
+EFFECTS = {
+    "valve_dynamics": {"f_n": 100.0, "zeta": 0.7},
+    "valve_deadband": {"overlap": 0.4, "edge": 0.15},
+    "heat_transfer": {"h_w": 40.0, "A_w0": 0.01, "T_s": reference_rig.T},
+    "piston_leakage": {"A_leak": 2e-8},
+    "stribeck_friction": {"v_s": 0.01, "F_brk": 140.0},
+    "end_cushioning": {"l_c": 0.012, "A_n": 5e-8, "w": 0.001},
+    "sensor_lag": {"delay": 0.003, "tau": 0.005},
+}
+#: Realistic ranges of the effects' parameters (documentation; not enforced).
+EFFECT_RANGES = {
+    "valve_dynamics": {"f_n": (60.0, 150.0), "zeta": (0.5, 0.9)},
+    "valve_deadband": {"overlap": (0.2, 0.6), "edge": (0.05, 0.3)},
+    "heat_transfer": {"h_w": (10.0, 150.0), "A_w0": (0.003, 0.03), "T_s": (283.0, 313.0)},
+    "piston_leakage": {"A_leak": (1e-8, 5e-8)},
+    "stribeck_friction": {"v_s": (0.002, 0.03), "F_brk": (reference_rig.F_d, 250.0)},
+    "end_cushioning": {"l_c": (0.005, 0.015), "A_n": (2e-8, 3e-7), "w": (0.0005, 0.003)},
+    "sensor_lag": {"delay": (0.001, 0.005), "tau": (0.002, 0.010)},
+}
+NOISE = {"p_sigma": 500.0, "alpha_sigma": 2e-4, "quantise": True}
+CONTACTS = {
+    "spring": {"x_contact": None, "stiffness": None, "damping": 0.0},
+    "ramp": {"start": 0.0, "rate": None, "max": None, "sign": 1.0},
+}
+DISTURBANCES = {"vibration": {"amplitude": None, "frequency": None}}
+_TOP = ("params", "effects", "noise", "contact", "disturbance", "seed", "x0")
+
+
+@dataclass
+class RigConfig:
+    """What the virtual rig is: built by :func:`load_config` (which validates it)."""
+    params: dict = field(default_factory=dict)       #: model parameter overrides
+    effects: dict = field(default_factory=dict)      #: effect name -> its parameters
+    noise: dict = field(default_factory=lambda: dict(NOISE))
+    contact: dict | None = None                      #: spring or ramp, see the module doc
+    disturbance: dict | None = None                  #: vibration, see the module doc
+    seed: int = 0                                    #: seed of the sensor noise
+    x0: float = 0.0                                  #: initial piston position [m]
+
+
+def _err(key: str, reason: str) -> ValueError:
+    return ValueError(f"rig config: {key}: {reason}")
+
+
+def _number(key: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise _err(key, f"must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _table(key: str, value) -> dict:
+    if not isinstance(value, dict):
+        raise _err(key, f"must be an object, got {value!r}")
+    return value
+
+
+def _fill(key: str, given: dict, defaults: dict) -> dict:
+    """Known keys of ``given`` as floats over ``defaults``; None in defaults = required."""
+    for name in given:
+        if name not in defaults:
+            raise _err(f"{key}.{name}", f"unknown key (known: {', '.join(defaults)})")
+    out = {}
+    for name, default in defaults.items():
+        if name in given:
+            out[name] = _number(f"{key}.{name}", given[name])
+        elif default is None:
+            raise _err(f"{key}.{name}", "missing")
+        else:
+            out[name] = default
+    return out
+
+
+def _require(key: str, ok: bool, reason: str) -> None:
+    if not ok:
+        raise _err(key, reason)
+
+
+def _model(params: dict):
+    """The physics parameter tuples of ``params`` (overrides) with the checks applied."""
+    p = dict(PARAMETERS)
+    p.update(params)
+    if "P_atm" in params and "P_e" not in params:
+        p["P_e"] = p["P_atm"]
+    valve = ph.Valve(A_max=p["A_max"], P_s=p["P_s"], P_e=p["P_e"])
+    gas = ph.Gas(k=p["k"], R=p["R"], T=p["T"])
+    cyl = ph.Cylinder(A_a=p["A_a"], A_b=p["A_b"], L=p["L"], V_a0=p["V_a0"], V_b0=p["V_b0"])
+    geom = ph.Geometry(a=p["a"], b=p["b"], h=p["h"], l_min=p["l_min"])
+    load = ph.Load(K_v=p["K_v"], F_s=p["F_s"], F_d=p["F_d"], F_L=p["F_L"], M=p["M"])
+    try:
+        ph.check_valve(valve)
+        ph.check_gas(gas)
+        ph.check_cylinder(cyl)
+        ph.check_geometry(geom, cyl.L)
+        ph.check_load(load)
+        for name in ("P_atm", "p_a0", "p_b0"):
+            ph.validation.require_positive(name, p[name])
+    except ph.ParameterError as e:
+        raise _err(f"params.{e.name}", str(e)) from None
+    return valve, gas, cyl, geom, load, p
+
+
+def _check_effect(name: str, q: dict, load, cyl) -> None:
+    key = f"effects.{name}"
+    if name == "valve_dynamics":
+        _require(f"{key}.f_n", q["f_n"] > 0.0, "must be > 0 Hz")
+        _require(f"{key}.zeta", q["zeta"] > 0.0, "must be > 0")
+    elif name == "valve_deadband":
+        _require(f"{key}.overlap", 0.0 <= q["overlap"] < 4.0, "must lie in [0, 4) V")
+        _require(f"{key}.edge", 0.0 <= q["edge"] <= q["overlap"], "must lie in [0, overlap] V")
+    elif name == "heat_transfer":
+        _require(f"{key}.h_w", q["h_w"] >= 0.0, "must be >= 0")
+        _require(f"{key}.A_w0", q["A_w0"] >= 0.0, "must be >= 0")
+        _require(f"{key}.T_s", q["T_s"] > 0.0, "must be > 0 K")
+    elif name == "piston_leakage":
+        _require(f"{key}.A_leak", q["A_leak"] >= 0.0, "must be >= 0")
+    elif name == "stribeck_friction":
+        _require(f"{key}.v_s", q["v_s"] > 0.0, "must be > 0 m/s")
+        _require(f"{key}.F_brk", q["F_brk"] >= load.F_d,
+                 f"must be >= the Coulomb force F_d = {load.F_d:g} N")
+    elif name == "end_cushioning":
+        _require(f"{key}.l_c", 0.0 < q["l_c"] <= 0.5 * cyl.L, f"must lie in (0, {0.5 * cyl.L:g}] m")
+        _require(f"{key}.A_n", q["A_n"] > 0.0, "must be > 0")
+        _require(f"{key}.w", 0.0 < q["w"] <= q["l_c"], "must lie in (0, l_c] m")
+    elif name == "sensor_lag":
+        _require(f"{key}.delay", 0.0 <= q["delay"] <= 1.0, "must lie in [0, 1] s")
+        _require(f"{key}.tau", q["tau"] >= 0.0, "must be >= 0 s")
+
+
+def load_config(source=None) -> RigConfig:
+    """A validated :class:`RigConfig` from a JSON file's path, a dict, a RigConfig or
+    None (the reference rig: no effects, no contact, realistic noise).
+
+    Every key is checked; an unknown or invalid one raises ``ValueError`` whose
+    message names it (``effects.valve_dynamics.f_n``).  Effects are filled with their
+    defaults, so the result says exactly what the rig simulates.
+    """
+    if source is None:
+        data = {}
+    elif isinstance(source, RigConfig):
+        data = {"params": source.params, "effects": source.effects, "noise": source.noise,
+                "contact": source.contact, "disturbance": source.disturbance,
+                "seed": source.seed, "x0": source.x0}
+    elif isinstance(source, dict):
+        data = source
+    elif isinstance(source, (str, os.PathLike)):
+        try:
+            with open(source, encoding="utf-8") as f:
+                data = json.load(f)
+        except json.JSONDecodeError as e:
+            raise ValueError(f"rig config {os.fspath(source)}: not valid JSON: {e}") from None
+        if not isinstance(data, dict):
+            raise ValueError(f"rig config {os.fspath(source)}: must hold a JSON object")
+    else:
+        raise TypeError(f"load_config takes a path, a dict or None, not {type(source).__name__}")
+    for key in data:
+        if key not in _TOP:
+            raise _err(key, f"unknown key (known: {', '.join(_TOP)})")
+
+    params = {}
+    for name, value in _table("params", data.get("params") or {}).items():
+        if name not in PARAMETERS:
+            raise _err(f"params.{name}", f"unknown parameter (known: {', '.join(PARAMETERS)})")
+        params[name] = _number(f"params.{name}", value)
+    _, _, cyl, _, load, _ = _model(params)
+
+    effects = {}
+    for name, value in _table("effects", data.get("effects") or {}).items():
+        if name not in EFFECTS:
+            raise _err(f"effects.{name}", f"unknown effect (known: {', '.join(EFFECTS)})")
+        if value is None or value is False:
+            continue
+        if value is True:
+            value = {}
+        q = _fill(f"effects.{name}", _table(f"effects.{name}", value), EFFECTS[name])
+        _check_effect(name, q, load, cyl)
+        effects[name] = q
+
+    noise_in = _table("noise", data.get("noise") or {})
+    noise = {}
+    for name in noise_in:
+        if name not in NOISE:
+            raise _err(f"noise.{name}", f"unknown key (known: {', '.join(NOISE)})")
+    for name in ("p_sigma", "alpha_sigma"):
+        noise[name] = _number(f"noise.{name}", noise_in.get(name, NOISE[name]))
+        _require(f"noise.{name}", noise[name] >= 0.0, "must be >= 0")
+    quant = noise_in.get("quantise", NOISE["quantise"])
+    _require("noise.quantise", isinstance(quant, bool), f"must be true or false, got {quant!r}")
+    noise["quantise"] = quant
+
+    contact = data.get("contact")
+    if contact is not None:
+        contact = dict(_table("contact", contact))
+        kind = contact.pop("type", None)
+        _require("contact.type", kind in CONTACTS, f"must be one of {', '.join(CONTACTS)}, got {kind!r}")
+        contact = {"type": kind, **_fill("contact", contact, CONTACTS[kind])}
+        if kind == "spring":
+            _require("contact.stiffness", contact["stiffness"] >= 0.0, "must be >= 0 N/m")
+            _require("contact.damping", contact["damping"] >= 0.0, "must be >= 0 N s/m")
+        else:
+            _require("contact.rate", contact["rate"] >= 0.0, "must be >= 0 N/s")
+            _require("contact.max", contact["max"] >= 0.0, "must be >= 0 N")
+            _require("contact.sign", contact["sign"] in (1.0, -1.0), "must be +1 or -1")
+
+    disturbance = data.get("disturbance")
+    if disturbance is not None:
+        disturbance = dict(_table("disturbance", disturbance))
+        kind = disturbance.pop("type", None)
+        _require("disturbance.type", kind in DISTURBANCES,
+                 f"must be one of {', '.join(DISTURBANCES)}, got {kind!r}")
+        disturbance = {"type": kind, **_fill("disturbance", disturbance, DISTURBANCES[kind])}
+        _require("disturbance.frequency", disturbance["frequency"] >= 0.0, "must be >= 0 Hz")
+
+    seed = data.get("seed", 0)
+    _require("seed", isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0,
+             f"must be an integer >= 0, got {seed!r}")
+    x0 = _number("x0", data.get("x0", 0.0))
+    _require("x0", 0.0 <= x0 <= cyl.L, f"must lie within the stroke [0, {cyl.L:g}] m")
+    return RigConfig(params=params, effects=effects, noise=noise, contact=contact,
+                     disturbance=disturbance, seed=seed, x0=x0)
+
