@@ -4,7 +4,7 @@
 Each case draws, from a seeded generator: load parameters within +-15 % of the
 reference rig (so the baseline must be re-identified), and either no effect, one
 effect of effects.md at a realistic magnitude (the virtual rig's own forms, drawn
-within ``boomfmi.rig.plant.EFFECT_RANGES``), a pair of effects, or a disturbance
+within ``boomfmi.rig.config.EFFECT_RANGES``), a pair of effects, or a disturbance
 outside the vocabulary (an engine vibration).  The virtual rig (noise and
 quantisation on) records a fit run and a holdout run of different random step
 commands; ``boomfmi.diagnose`` sees only the recordings.  Prints the confusion matrix,
@@ -30,16 +30,21 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
+from boomfmi.diagnose import diagnose  # noqa: E402
+from boomfmi.experiments import random_steps  # noqa: E402
+from boomfmi.physics import reference_rig  # noqa: E402
+from boomfmi.recording import write_recording  # noqa: E402
+from boomfmi.rig.config import EFFECT_RANGES  # noqa: E402
+from boomfmi.rig.offline import run_offline  # noqa: E402
+
 EFFECTS = ("valve_dynamics", "valve_deadband", "heat_transfer", "piston_leakage",
            "stribeck_friction", "end_cushioning", "sensor_lag")
 LOAD = ("K_v", "F_s", "F_d", "F_L", "M")
 
 
 def draw_case(i: int, seed: int):
-    from boomfmi.physics import reference_rig as rig
-    from boomfmi.rig.config import EFFECT_RANGES
     rng = np.random.default_rng(seed * 1000 + i)
-    params = {k: float(getattr(rig, k) * rng.uniform(0.85, 1.15)) for k in LOAD}
+    params = {k: float(getattr(reference_rig, k) * rng.uniform(0.85, 1.15)) for k in LOAD}
     params["F_s"] = max(params["F_s"], 1.05 * params["F_d"])
     kind = ["none", "single", "single", "single", "single", "pair", "vibration"][i % 7]
     effects, truth, disturbance = {}, [], None
@@ -63,10 +68,6 @@ def draw_case(i: int, seed: int):
 
 
 def run_case(case: dict) -> dict:
-    from boomfmi.diagnose import diagnose
-    from boomfmi.experiments import random_steps
-    from boomfmi.recording import write_recording
-    from boomfmi.rig.offline import run_offline
     cfg = {"params": case["params"], "effects": case["effects"], "seed": case["seed"]}
     if case["disturbance"]:
         cfg["disturbance"] = case["disturbance"]
