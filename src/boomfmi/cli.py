@@ -134,15 +134,12 @@ def _simulate(args) -> int:
 def _view_key(key_file, option: str, what: str) -> bytes:
     """The link key that signs (``simulate --view``) or checks (``view --live``) the
     live stream; LinkError naming the options when there is none."""
-    import os
     from .link.protocol import KEY_ENV, load_key
-    if not key_file and not os.environ.get(KEY_ENV):
-        raise LinkError(f"no link key: {option} authenticates {what} with the rig link's key; give "
-                        f"--key-file K or set ${KEY_ENV} (the live view does not run unauthenticated)")
     try:
         return load_key(key_file)
     except LinkError as e:
-        raise LinkError(f"{option}: {e}") from None
+        raise LinkError(f"{option} authenticates {what} with the rig link's key (--key-file K or "
+                        f"${KEY_ENV}): {e}") from None
 
 
 def _view(args) -> int:

@@ -111,7 +111,6 @@ def write_outputs(result: FitResult, recs, out, holdout=()) -> dict:
     (:class:`OutputSet`: all or none; a file this run does not write is removed, so no
     earlier run's passes for this one's).  ``doc["written"]`` lists the files."""
     out = Path(out)
-    fits = {str(r.path) for r in recs}
     for h in holdout:
         check_distinct(recs, read_recording(h))
     values = result.values()
@@ -131,7 +130,7 @@ def write_outputs(result: FitResult, recs, out, holdout=()) -> dict:
         if physical:
             write_ssv(files.path(names[1]), "identified",
                       {SSP_NAMES[k]: (v, result.params[k].unit) for k, v in finite.items()},
-                      f"identified by boomfmi ({result.method}) from " + ", ".join(sorted(fits)))
+                      f"identified by boomfmi ({result.method}) from " + ", ".join(str(r.path) for r in recs))
         if physical and _usable(finite):
             plot_fit(finite, recs[0], files.path(names[2]))
         doc["written"] = [str(p) for p in [out, *files.written()]]

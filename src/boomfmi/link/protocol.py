@@ -138,9 +138,20 @@ def load_key(key_file: str | os.PathLike | None = None, env: dict | None = None)
     return key
 
 
+def mac(payload: bytes, key: bytes) -> bytes:
+    """The HMAC-SHA256 of ``payload`` under ``key`` (MAC_SIZE bytes): what every signed
+    datagram of boomfmi carries, the link's and the live view's."""
+    return hmac.new(key, payload, hashlib.sha256).digest()
+
+
+def verifies(payload: bytes, tag: bytes, key: bytes) -> bool:
+    """Whether ``tag`` is ``payload``'s :func:`mac` under ``key`` (in constant time)."""
+    return hmac.compare_digest(tag, mac(payload, key))
+
+
 def _seal(payload: bytes, key: bytes) -> bytes:
     payload = payload.ljust(PAYLOAD_SIZE, b"\0")
-    return payload + hmac.new(key, payload, hashlib.sha256).digest()
+    return payload + mac(payload, key)
 
 
 def encode_command(seq: int, t: float, u: float, key: bytes, dt: float = 1e-3, session: int = 0) -> bytes:
@@ -163,8 +174,8 @@ def decode(datagram: bytes, key: bytes):
     :class:`Malformed` or :class:`BadMac`."""
     if len(datagram) != DATAGRAM_SIZE:
         raise Malformed(f"{len(datagram)} bytes, not {DATAGRAM_SIZE}")
-    payload, mac = datagram[:PAYLOAD_SIZE], datagram[PAYLOAD_SIZE:]
-    if not hmac.compare_digest(mac, hmac.new(key, payload, hashlib.sha256).digest()):
+    payload, tag = datagram[:PAYLOAD_SIZE], datagram[PAYLOAD_SIZE:]
+    if not verifies(payload, tag, key):
         raise BadMac("the MAC does not verify")
     magic, version, kind, seq, flags, t = _HEADER.unpack_from(payload)
     if magic != MAGIC or version != VERSION:

@@ -177,10 +177,10 @@ class Boom:
             V_a, V_b = ph.chamber_volumes(x, cyl)
             m = masses[0]
             tau = fx.thermal_time_constant(max(m, 1e-12), fx.chamber_wall_area(V_a, cyl.A_a, self.bore), self.h_wall, k, R)
-            dp_a += (m * R * T / V_a - p_a) / tau
+            dp_a += fx.thermal_relaxation_rate(p_a, m, V_a, tau, R, T)
             m = masses[1]
             tau = fx.thermal_time_constant(max(m, 1e-12), fx.chamber_wall_area(V_b, cyl.A_b, self.bore), self.h_wall, k, R)
-            dp_b += (m * R * T / V_b - p_b) / tau
+            dp_b += fx.thermal_relaxation_rate(p_b, m, V_b, tau, R, T)
         return dp_a, dp_b
 
     # ------------------------------------------------------------------- load

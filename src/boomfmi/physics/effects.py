@@ -47,6 +47,14 @@ def thermal_relaxation_step(p: float, m: float, V: float, dt: float, tau: float,
     return p_iso + (p - p_iso) * math.exp(-dt / tau)
 
 
+def thermal_relaxation_rate(p: float, m: float, V: float, tau: float, R: float, T_wall: float) -> float:
+    """d/dt of a chamber's pressure [Pa/s] from its heat exchange with the wall: the
+    pressure ``p`` [Pa] relaxes towards the isothermal ``m R T_wall / V`` of its air mass
+    ``m`` [kg] in volume ``V`` [m^3] with time constant ``tau`` [s] (the rate form of
+    :func:`thermal_relaxation_step`, for an ODE solver)."""
+    return (m * R * T_wall / V - p) / tau
+
+
 def chamber_wall_area(V: float, A_piston: float, bore: float) -> float:
     """The wall [m^2] a chamber's air of volume ``V`` [m^3] touches: the two end faces
     ``2 A_piston`` and the barrel over the chamber's equivalent length ``V / A_piston``

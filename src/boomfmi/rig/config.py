@@ -176,7 +176,7 @@ def _require(key: str, ok: bool, reason: str) -> None:
         raise _err(key, reason)
 
 
-def _model(params: dict):
+def model_parameters(params: dict):
     """The physics parameter tuples of ``params`` (overrides) with the checks applied."""
     p = dict(PARAMETERS)
     p.update(params)
@@ -262,7 +262,7 @@ def load_config(source=None) -> RigConfig:
         if name not in PARAMETERS:
             raise _err(f"params.{name}", f"unknown parameter (known: {', '.join(PARAMETERS)})")
         params[name] = _number(f"params.{name}", value)
-    _, _, cyl, _, load, _ = _model(params)
+    _, _, cyl, _, load, _ = model_parameters(params)
 
     effects = {}
     for name, value in _table("effects", data.get("effects") or {}).items():

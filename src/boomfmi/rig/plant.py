@@ -46,7 +46,7 @@ from ..physics.geometry import alpha_from_x
 from ..physics.orifice import signed_mass_flow, signed_mass_flow_slope
 from ..physics.params import Gas
 from ..physics.valve import orifice_area
-from .config import RigConfig, _model, load_config
+from .config import RigConfig, load_config, model_parameters
 from .truth import (chamber_temperature, chamber_wall_areas, cushion_engagement,
                     cushion_exhaust_area, first_order_coefficient, overlap_command,
                     piston_leak_flows, quantise, ramp_force, spool_step, spool_transition,
@@ -103,7 +103,7 @@ class VirtualRig:
 
     def __init__(self, config: RigConfig | None = None):
         self.config = cfg = load_config(config)
-        self._valve, self._gas, self._cyl, self._geom, self._load, p = _model(cfg.params)
+        self._valve, self._gas, self._cyl, self._geom, self._load, p = model_parameters(cfg.params)
         self._P_atm, self._p_a0, self._p_b0 = p["P_atm"], p["p_a0"], p["p_b0"]
         self._boom = Boom(Model(valve=self._valve, gas=self._gas, cylinder=self._cyl,
                                 geometry=self._geom, load=self._load, P_atm=self._P_atm))
@@ -146,11 +146,8 @@ class VirtualRig:
         self._p_a, self._p_b = self._p_a0, self._p_b0
         self._x, self._v = self.config.x0, 0.0
         self._y, self._y_dot = self._valve.u_centre, 0.0          # spool [V], [V/s]
-        T = self._gas.T
-        V_a, V_b = chamber_volumes(self._x, self._cyl)
-        self._T_a = self._T_b = T
-        self._m_a = self._p_a * V_a / (self._gas.R * T)
-        self._m_b = self._p_b * V_b / (self._gas.R * T)
+        self._T_a = self._T_b = self._gas.T
+        self._m_a, self._m_b = self._boom.air_masses(self._p_a, self._p_b, self._x)
         self._z = (self._p_a - self._P_atm, self._p_b - self._P_atm, alpha_from_x(self._x, self._geom))
         self._history = deque([(0.0, *self._z)])
         self._rng = np.random.default_rng(self.config.seed)

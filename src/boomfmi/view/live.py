@@ -25,8 +25,6 @@ session (``replayed``).  A datagram's JSON is parsed only after its MAC verifies
 from __future__ import annotations
 
 import collections
-import hashlib
-import hmac
 import json
 import math
 import re
@@ -35,7 +33,7 @@ import socket
 import time
 
 from ..link.client import parse_address
-from ..link.protocol import MAC_SIZE
+from ..link.protocol import MAC_SIZE, load_key, mac, verifies
 from ..physics import Geometry, ParameterError, check_geometry
 
 #: the view's frame rate is capped by what the sender sends
@@ -92,6 +90,12 @@ def _no_duplicates(pairs):
     return out
 
 
+def strict_loads(text):
+    """``json.loads`` that refuses what JSON is not (NaN, Infinity) and a key given twice:
+    raises ``ValueError``.  Count the nesting first (:func:`json_depth`)."""
+    return json.loads(text, parse_constant=_no_constant, object_pairs_hook=_no_duplicates)
+
+
 def geometry(value) -> Geometry:
     """The sample's ``geom`` as a :class:`Geometry`, or :class:`Refused` unless it is four
     finite positive lengths (h >= 0) of at most MAX_LENGTH that make the linkage's
@@ -135,7 +139,7 @@ def check_sample(obj) -> dict:
 def seal(obj: dict, key: bytes) -> bytes:
     """One datagram: MAGIC, the JSON of ``obj`` and their HMAC-SHA256 under ``key``."""
     payload = MAGIC + json.dumps(obj, allow_nan=False, separators=(",", ":")).encode()
-    return payload + hmac.new(key, payload, hashlib.sha256).digest()
+    return payload + mac(payload, key)
 
 
 def open_datagram(data: bytes, key: bytes) -> dict:
@@ -145,20 +149,20 @@ def open_datagram(data: bytes, key: bytes) -> dict:
         raise Refused("malformed", f"{len(data)} bytes, more than {MAX_DATAGRAM}")
     if len(data) < len(MAGIC) + MAC_SIZE or not data.startswith(MAGIC):
         raise Refused("unauthenticated", "not signed: no BFV1 magic, or too short to hold a MAC")
-    payload, mac = data[:-MAC_SIZE], data[-MAC_SIZE:]
-    if not hmac.compare_digest(mac, hmac.new(key, payload, hashlib.sha256).digest()):
+    payload, tag = data[:-MAC_SIZE], data[-MAC_SIZE:]
+    if not verifies(payload, tag, key):
         raise Refused("unauthenticated", "the MAC does not verify under the view's key")
     body = payload[len(MAGIC):]
-    if _depth(body) > 2:
+    if json_depth(body) > 2:
         raise Refused("invalid", "the sample nests deeper than its geom list")
     try:
-        obj = json.loads(body.decode("utf-8"), parse_constant=_no_constant, object_pairs_hook=_no_duplicates)
+        obj = strict_loads(body.decode("utf-8"))
     except (ValueError, RecursionError) as e:          # UnicodeDecodeError is a ValueError
         raise Refused("invalid", f"not a JSON sample: {str(e)[:120]}") from None
     return check_sample(obj)
 
 
-def _depth(text) -> int:
+def json_depth(text) -> int:
     """How deep JSON ``text`` (str or bytes) nests its arrays and objects, strings
     skipped; counted before parsing, so that depth never reaches the parser."""
     if isinstance(text, bytes):
@@ -223,7 +227,6 @@ class LiveSender:
         if not rate > 0:
             raise ValueError(f"the live view's rate must be > 0 per second, not {rate!r}")
         if not key:
-            from ..link.protocol import load_key
             key = load_key()                 # $BOOMFMI_LINK_KEY, else LinkError
         self.address = parse_address(url)
         self.columns, self.geom, self.period = columns, [float(v) for v in geom], 1.0 / rate

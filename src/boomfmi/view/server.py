@@ -59,10 +59,11 @@ from aiohttp import WSCloseCode, WSMsgType, web
 from aiohttp.http_exceptions import HttpProcessingError
 
 from ..link.client import parse_address
+from ..link.protocol import load_key
 from ..physics import Geometry
 from ..physics import reference_rig
 from .frames import Run, live_frame, load_run, scene
-from .live import FeedGuard, Refused, _depth, _no_constant, _no_duplicates, open_datagram
+from .live import FeedGuard, Refused, json_depth, open_datagram, strict_loads
 
 WEB = Path(__file__).resolve().parent / "web"
 MODULES = WEB / "node_modules"
@@ -261,10 +262,10 @@ def parse_command(data) -> dict:
         raise BadMessage("binary messages are not accepted: send JSON text")
     if len(data) > MAX_MESSAGE or len(data.encode("utf-8", "replace")) > MAX_MESSAGE:
         raise BadMessage(f"a message may have at most {MAX_MESSAGE} bytes")
-    if _depth(data) > 1:
+    if json_depth(data) > 1:
         raise BadMessage("a message is one flat JSON object: nothing nested")
     try:
-        msg = json.loads(data, parse_constant=_no_constant, object_pairs_hook=_no_duplicates)
+        msg = strict_loads(data)
     except (ValueError, RecursionError) as e:
         raise BadMessage(f"not JSON: {str(e)[:120]}") from None
     if not isinstance(msg, dict):
@@ -596,7 +597,6 @@ def serve(replay=None, live: str | None = None, host: str = "127.0.0.1", port: i
     hub = None
     if live is not None:
         if not key:
-            from ..link.protocol import load_key
             key = load_key()
         udp = parse_address(live)
         hub = LiveHub(live, key)
