@@ -7,6 +7,7 @@ u = U_i for the rest of the period, U = 1, 2.5, 4 V.
 """
 from __future__ import annotations
 
+import math
 from typing import Callable
 
 import numpy as np
@@ -73,6 +74,91 @@ def held(segments) -> Callable[[float], dict]:
     return profile
 
 
+def manoeuvres(seed: int = 0, duration: float = 12.0) -> Callable[[float], dict]:
+    """An operator's ordinary manoeuvres, drawn from ``seed``: runs into both stroke
+    ends, large (1.5 to 4.5 V from centre) and small (0.5 to 1.5 V) openings both ways,
+    holds in mid-stroke with the valve at exactly 5 V for 1 to 2 s (after a short
+    extension, and left by a small opening: a breakaway from rest in mid-stroke),
+    direct reversals (one direction straight into the other) and a chirp around 5 V
+    (amplitude 0.8 to 1.6 V, 0.5 to 4 Hz over 1.5 s).  The blocks come in a random
+    order, each followed by 0.2 to 0.5 s at the centre; every design holds a run to
+    each end, a hold and a chirp.  Unlike :func:`random_steps`, most stick/slip events
+    here are in mid-stroke (breakaways after a hold at the valve's centre, reversals,
+    stops), not starts from an end stop."""
+    rng = np.random.default_rng(seed)
+    side = lambda: 1.0 if rng.random() < 0.6 else -1.0     # +1: extending (u < 5)
+    blocks = ["end-", "end+", "hold", "chirp"] + list(rng.choice(("large", "small", "reversal", "hold"), size=8))
+    steps, chirps, t = [], [], 0.0     # steps: (start, u); chirps: (start, stop, amplitude)
+
+    def step(u, lo, hi):
+        nonlocal t
+        steps.append((t, float(u)))
+        t += float(rng.uniform(lo, hi))
+    for kind in (blocks[i] for i in rng.permutation(len(blocks))):
+        if t >= duration:
+            break
+        if kind == "end-":
+            step(5.0 + rng.uniform(3.0, 4.5), 0.8, 1.2)
+        elif kind == "end+":
+            step(5.0 - rng.uniform(3.0, 4.5), 1.0, 1.4)
+        elif kind == "large":
+            step(5.0 - side() * rng.uniform(1.5, 4.5), 0.1, 0.3)
+        elif kind == "small":
+            step(5.0 - side() * rng.uniform(0.5, 1.5), 0.3, 0.7)
+        elif kind == "reversal":
+            s = side()
+            step(5.0 - s * rng.uniform(1.0, 3.5), 0.15, 0.35)
+            step(5.0 + s * rng.uniform(1.0, 3.5), 0.15, 0.35)
+        elif kind == "hold":
+            step(5.0 - rng.uniform(1.5, 3.0), 0.15, 0.4)
+            step(5.0, 1.0, 2.0)
+            step(5.0 - side() * rng.uniform(0.5, 1.5), 0.3, 0.6)
+        else:
+            amp = float(rng.uniform(0.8, 1.6))
+            chirps.append((t, t + 1.5, amp))
+            step(5.0, 1.5, 1.5)
+        step(5.0, 0.2, 0.5)
+    times = [s for s, _ in steps]
+    levels = [u for _, u in steps]
+
+    def profile(t: float) -> dict:
+        for t0, t1, amp in chirps:
+            if t0 <= t < t1:
+                tau = t - t0        # 0.5 Hz rising linearly to 4 Hz
+                return {"u": 5.0 + amp * math.sin(2.0 * math.pi * (0.5 * tau + 3.5 / 3.0 * tau * tau / 2.0))}
+        i = max(0, int(np.searchsorted(times, t, side="right")) - 1)
+        return {"u": levels[i]}
+    profile.duration = duration
+    profile.breakpoints = sorted(set(times[1:]) | {c for t0, t1, _ in chirps for c in (t0, t1)})
+    return profile
+
+
+def sine_sweep(seed: int = 0, duration: float = 12.0) -> Callable[[float], dict]:
+    """A sine sweep of the command around the centre: amplitude 1 to 2.5 V, its
+    frequency rising exponentially from 0.5 Hz to 6 Hz over ``duration`` [s], on a bias
+    that changes sign every 1.5 to 2.5 s (0.4 to 1 V towards extension, then as much
+    towards retraction), so that the open-loop piston oscillates in mid-stroke and
+    travels between the ends instead of settling on one; drawn from ``seed``.  The
+    piston reverses in mid-stroke again and again and seldom rests."""
+    rng = np.random.default_rng(seed)
+    amp = float(rng.uniform(1.0, 2.5))
+    f0, f1 = 0.5, 6.0
+    rate = math.log(f1 / f0) / duration
+    edges, biases, t = [], [], 0.0
+    while t < duration:
+        edges.append(t)
+        biases.append(float(rng.uniform(0.4, 1.0)) * (-1.0 if len(biases) % 2 == 0 else 1.0))
+        t += float(rng.uniform(1.5, 2.5))
+
+    def profile(t: float) -> dict:
+        bias = biases[max(0, int(np.searchsorted(edges, t, side="right")) - 1)]
+        phase = 2.0 * math.pi * f0 * math.expm1(rate * max(t, 0.0)) / rate
+        return {"u": min(10.0, max(0.0, 5.0 + bias + amp * math.sin(phase)))}
+    profile.duration = duration
+    profile.breakpoints = edges[1:]
+    return profile
+
+
 def dig() -> Callable[[float], dict]:
     """An operator's digging cycle for force estimation (teleoperation), 10 s, from the
     boom held at mid-stroke (x0 = 50 mm in the contact scenarios): lower it gently into
@@ -88,7 +174,7 @@ def dig() -> Callable[[float], dict]:
 
 
 PROFILES = {"paper_multistep": paper_multistep, "holdout_multistep": holdout_multistep,
-            "random_steps": random_steps, "dig": dig}
+            "random_steps": random_steps, "manoeuvres": manoeuvres, "sine_sweep": sine_sweep, "dig": dig}
 
 
 def profile(name: str) -> Callable[[float], dict]:

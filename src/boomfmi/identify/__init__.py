@@ -26,7 +26,7 @@ SSP_NAMES = {"K_v": "boom_load.K_v", "F_s": "boom_load.F_s", "F_d": "boom_load.F
 
 
 def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
-                        cutoff: float = CUTOFF, eq13: str = "printed"):
+                        cutoff: float = CUTOFF, eq13: str = "printed", refine_all: bool = True):
     """Read, validate and prepare the recordings, then identify; returns
     ``(FitResult, recordings, prepared)``."""
     if method not in ("fit", "paper"):
@@ -44,7 +44,7 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
     rig = rig_model(recs[0])
     preps = [prepare(r, cutoff, geometry=rig.geometry, P_atm=rig.P_atm) for r in recs]
     if method == "fit":
-        result = identify(preps, rig.cylinder, rig.geometry, P_atm=rig.P_atm, with_A_max=with_A_max,
+        result = identify(preps, rig.cylinder, rig.geometry, P_atm=rig.P_atm, with_A_max=with_A_max, refine_all=refine_all,
                           valve=rig.valve, gas=rig.gas)
     else:
         result = identify_paper(preps, rig.cylinder, P_atm=rig.P_atm, eq13=eq13)

@@ -1,51 +1,61 @@
-"""The sound identification of the load: all samples, least squares, intervals.
+"""The sound identification of the load: every sample, every start, intervals.
 
-Three stages, each on every recording given:
+Three stages, on every recording given together:
 
-1. **Equation error on Eq. 8.**  While the piston slides (away from the stops and from
-   the instants it starts or stops), Eq. 8 is linear in the unknowns::
+1. **Equation error on Eq. 8, through every mode** (:func:`equation_error`).  Each
+   sample is classified as sliding (and which way) or resting (stuck, or held at a
+   stop) from the position alone (:func:`motion_modes`; the speed that counts as
+   motion is set by the recording's own position resolution).  While resting,
+   friction or the stop balances the drive force, so Eq. 8 holds with a = v = 0 and a
+   friction that needs no parameter; while sliding, the friction is F_d cos(phi)
+   against the motion.  Every term is filtered alike by a state-variable filter, so
+   the filtered equation holds at every sample (starts, stops, reversals, holds at the
+   valve's centre), except within the filter's reach of an impact on a stop.  Least
+   squares gives M, K_v, F_d and F_L: K_v, F_d and F_L well, M roughly (the mass shows
+   only in transients of M / K_v, about 8 ms, which a filter slow enough for a
+   quantised position blurs).
+2. **Velocity output error over every sliding run** (:func:`velocity_error`).  Within
+   each run of sliding one way, Eq. 8 is linear in the velocity; driven by the recorded
+   pressures and position (phi), from the measured velocity at the run's start, it is
+   one recursive filter (``physics.sliding_velocity``).  The simulated and the measured
+   velocity, both low-passed alike, are matched over all runs (scipy's least_squares)
+   for M, K_v, F_d and F_L together.  No drift (each run restarts, and the viscous
+   friction forgets the start within milliseconds) and no static friction: the modes
+   come from the recording.
+3. **Static friction from every start** (:func:`static_friction`).  Each run that
+   follows a rest (in mid-stroke after a hold, after a stop, or from an end stop)
+   starts when the drive force reaches F_s cos(phi).  For every F_s on a grid, the run
+   is simulated from that instant (stage 2's filter) and matched to the measured
+   velocity; the profile of that cost over F_s gives F_s and its interval.  The
+   largest drive force the piston held at rest in mid-stroke is a lower bound.  Where
+   the starts do not pin F_s down (the drive force jumps through the static band
+   within a sample or two, as in a start under full pressure), the interval says so
+   and F_s is reported as not identified: nothing else depends on it.
 
-       P_a A_a - P_b A_b - P_atm (A_a - A_b) = M a + K_v v + F_d cos(phi) sign(v) + F_L sin(phi)
-
-   Every signal is low-pass filtered alike (``preprocess``), so the filtered equation
-   holds too; ordinary least squares gives M, K_v, F_d and F_L.
-2. **Breakaway by output error.**  F_s is where the drive force stands when the piston
-   starts to move; a start is only seen once the piston has moved a quantum or two,
-   milliseconds after the fact, while the pressure races on.  So F_s is fitted instead:
-   the boom alone (``physics.advance_load``) is simulated through every start, driven by
-   the recorded pressures, and F_s is the value whose simulated starts best match the
-   recorded position.  Only starts where the drive force takes at least ``SLOW_START``
-   to cross the static band (2 F_s cos(phi)) are used: in a faster one a fraction of a
-   millisecond of timing moves F_s by tens of newtons (a start from the upper stop, where
-   cos(phi) is small and both chambers change at once, is the typical case).
-3. **Output error on the whole trajectory** (``refine=True``): K_v, F_d, F_L and M
-   together, F_s held, simulating the boom driven by the recorded pressures through
-   every start and matching the recorded position (scipy's least_squares), from stages
-   1 and 2.
-
-Intervals are 95 % intervals from a moving-block bootstrap of stage 1 (residuals of
-filtered data are correlated, which ordinary least-squares intervals ignore) and, for
-F_s and after stage 3, from the Jacobian with the residuals' correlation length.  A
-parameter whose interval is wider than half its value gets a warning: the data cannot
-identify it.
+Intervals: for stages 1 and 2 a bootstrap over the runs (blocks of correlated
+residuals) of the linearised fit, for F_s the profile of its cost; each widened by
+``SYSTEMATIC`` (a relative floor, calibrated on effect-free recordings of random rigs
+and command designs, ``benchmarks/identification.py``: the share of the error that
+the noise does not explain: sensor resolution, numerics, mode classification).
 """
 from __future__ import annotations
 
 import math
-import multiprocessing
-import os
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares, minimize_scalar
+from scipy.ndimage import median_filter
+from scipy.optimize import least_squares
+from scipy.special import ndtr
 
 from .. import physics as ph
 from ..physics import reference_rig
-from .preprocess import Prepared
+from .preprocess import Prepared, lowpass
 
 PARAMS = ("K_v", "F_s", "F_d", "F_L", "M")
 UNITS = {"K_v": "N.s/m", "F_s": "N", "F_d": "N", "F_L": "N", "M": "kg", "A_max": "m2"}
+#: Relative floor of every interval's half-width (see the module's docstring).
+SYSTEMATIC = {"K_v": 0.01, "F_s": 0.03, "F_d": 0.015, "F_L": 0.005, "M": 0.03}
 
 
 @dataclass
@@ -70,6 +80,15 @@ class FitResult:
         return {k: e.value for k, e in self.params.items()}
 
 
+def _widened(name: str, value: float, lo: float, hi: float) -> Estimate:
+    """An estimate whose interval is at least ``SYSTEMATIC[name]`` of its value wide on
+    either side (the statistical interval combined with the floor in quadrature)."""
+    floor = SYSTEMATIC.get(name, 0.0) * abs(value)
+    below = math.hypot(value - lo, floor)
+    above = math.hypot(hi - value, floor)
+    return Estimate(float(value), (float(value - below), float(value + above)), UNITS[name])
+
+
 def _dilate(mask: np.ndarray, n: int) -> np.ndarray:
     if n <= 0:
         return mask
@@ -77,46 +96,110 @@ def _dilate(mask: np.ndarray, n: int) -> np.ndarray:
     return np.convolve(mask.astype(float), kernel, mode="same") > 0
 
 
-def sliding_samples(p: Prepared, L: float, v_min: float = 0.01, margin: float = 0.002,
-                    guard: float = 0.04) -> np.ndarray:
-    """Samples where Eq. 8's sliding branch holds cleanly: |v| > v_min, the piston
-    ``margin`` away from both stops, and ``guard`` seconds from any stop contact, stick
-    or reversal (the filter smears those over a few tens of milliseconds)."""
-    n_guard = int(round(guard * p.fs))
-    at_stop = (p.x_raw <= margin) | (p.x_raw >= L - margin)
-    slow = np.abs(p.v) <= v_min
-    reversal = np.zeros_like(slow)
-    reversal[1:] = np.sign(p.v[1:]) != np.sign(p.v[:-1])
-    bad = _dilate(at_stop | slow | reversal, n_guard)
-    return ~bad
+def resolution(x_raw: np.ndarray) -> float:
+    """The position sensor's resolution [m] as the recording shows it: the smallest
+    step its readings take (the 5th percentile of the nonzero sample-to-sample
+    changes, which noise only widens)."""
+    steps = np.abs(np.diff(x_raw))
+    steps = steps[steps > 1e-12]
+    return float(np.percentile(steps, 5)) if len(steps) else 1e-5
 
 
-def correlation_samples(p: Prepared) -> float:
+#: Cut-off [Hz] of the filter the mode classification smooths the position with.
+MODE_CUTOFF = 20.0
+
+
+@dataclass
+class Modes:
+    """Where the piston slides, and which way, sample by sample.
+
+    ``sliding``: the smoothed velocity is clearly beyond what the sensor's resolution
+    and noise make of a resting piston; ``direction``: its sign (0 at rest);
+    ``impacts``: samples where the piston arrives at a stop while moving (the stop's
+    impulse is not in Eq. 8, so the samples around them are left out)."""
+    sliding: np.ndarray
+    direction: np.ndarray
+    impacts: np.ndarray
+    v_min: float
+
+
+def motion_modes(p: Prepared, L: float) -> Modes:
+    """Classify every sample of a prepared recording (:class:`Modes`).  The speed that
+    counts as motion is set by the recording's own position resolution (two
+    resolution steps per period of the smoothing filter, and at least 2 mm/s): a coarse
+    sensor needs a larger speed to tell motion from rest."""
+    xs = lowpass(p.x_raw, p.fs, MODE_CUTOFF)
+    vs = np.gradient(xs, p.t)
+    v_min = max(0.002, 2.0 * resolution(p.x_raw) * MODE_CUTOFF)
+    sliding = np.abs(vs) > v_min
+    direction = np.sign(vs) * sliding
+    margin = max(3.0 * resolution(p.x_raw), 2e-4)
+    at_stop = (xs < margin) | (xs > L - margin)
+    impacts = np.flatnonzero(at_stop[1:] & ~at_stop[:-1] & sliding[:-1]) + 1
+    return Modes(sliding, direction, impacts, v_min)
+
+
+#: Cut-off [Hz] of the state-variable filter of the equation error.
+EE_CUTOFF = 10.0
+#: Periods of that cut-off over which a filtered sample still feels an impact on a stop.
+REACH = 3.0
+
+
+def correlation_samples(p: Prepared, cutoff: float | None = None) -> float:
     """Samples over which the residuals of filtered data stay correlated: about one
     period of the low-pass filter's cut-off, fs / (2 cutoff) (20 at 1 kHz and 25 Hz).
     Interval widths from least squares are scaled by its square root."""
-    return max(1.0, p.fs / (2.0 * p.cutoff))
+    return max(1.0, p.fs / (2.0 * (cutoff or p.cutoff)))
+
+
+def equation_rows(p: Prepared, cyl: ph.Cylinder, P_atm: float, L: float, cutoff: float = EE_CUTOFF):
+    """Eq. 8 over the whole recording, through a state-variable filter G (zero-phase
+    low-pass at ``cutoff``), as rows ``X theta = y`` in theta = (M, K_v, F_d, F_L)::
+
+        M G[a] + K_v G[v] + F_d G[s cos(phi) sign(v)] + F_L G[s sin(phi)] = G[s F_p]
+
+    s is 1 while the piston slides and 0 while it sticks or rests at a stop: there the
+    friction (or the stop) balances the drive force exactly, so Eq. 8 holds with
+    F_c = F_p - F_L sin(phi) and a = v = 0, which is the row with s = 0.  Since every
+    term is filtered alike, the equation holds at every sample, through every start,
+    stop and reversal, and the filter can be slow (its noise is low) without biasing
+    anything.  G[a] and G[v] are derivatives of G[x].  Samples within the filter's
+    reach of the recording's ends or of an impact on a stop are left out (a stop's
+    impulse is not in Eq. 8).  Returns ``(X, y, mask)``."""
+    modes = motion_modes(p, L)
+    s = modes.sliding.astype(float)
+    G = lambda y: lowpass(y, p.fs, cutoff)
+    xg = G(p.x_raw)
+    vg = np.gradient(xg, p.t)
+    ag = np.gradient(vg, p.t)
+    F_p = ph.piston_force(p.p_a_raw, p.p_b_raw, cyl, P_atm)
+    X = np.column_stack([ag, vg, G(modes.direction * np.cos(p.phi)), G(s * np.sin(p.phi))])
+    y = G(s * F_p)
+    reach = int(REACH * p.fs / cutoff)
+    use = np.ones(len(y), bool)
+    use[:reach] = use[-reach:] = False
+    for i in modes.impacts:
+        use[max(0, i - reach):i + reach] = False
+    return X, y, use
 
 
 def equation_error(preps: list[Prepared], cyl: ph.Cylinder, P_atm: float, L: float,
-                   n_boot: int = 200, block: float = 0.1, seed: int = 0):
-    """Stage 1: M, K_v, F_d, F_L by least squares on Eq. 8 over sliding samples."""
-    X, y, groups = [], [], []
-    for i, p in enumerate(preps):
-        m = sliding_samples(p, L)
-        cos_s = np.cos(p.phi) * np.sign(p.v)
-        X.append(np.column_stack([p.a, p.v, cos_s, np.sin(p.phi)])[m])
-        y.append(ph.piston_force(p.p_a, p.p_b, cyl, P_atm)[m])
-        groups.append(np.full(m.sum(), i))
+                   n_boot: int = 200, block: float = 0.1, seed: int = 0, cutoff: float = EE_CUTOFF):
+    """Stage 1: M, K_v, F_d, F_L by least squares on :func:`equation_rows` of every
+    recording; 95 % intervals from a moving-block bootstrap of the rows."""
+    X, y = [], []
+    for p in preps:
+        Xi, yi, use = equation_rows(p, cyl, P_atm, L, cutoff)
+        X.append(Xi[use])
+        y.append(yi[use])
     X, y = np.vstack(X), np.concatenate(y)
-    if len(y) < 50:
-        raise ValueError("too few sliding samples to identify the load: the recordings hold almost no motion")
+    if len(y) < 50 or np.ptp(X[:, 2]) == 0.0:
+        raise ValueError("too few samples in motion to identify the load: the recordings hold almost no motion")
     scale = np.abs(X).max(axis=0)
     scale[scale == 0] = 1.0
     theta, *_ = np.linalg.lstsq(X / scale, y, rcond=None)
     theta /= scale
     cond = float(np.linalg.cond(X / scale))
-    # moving-block bootstrap of the rows (blocks of correlated residuals)
     rng = np.random.default_rng(seed)
     fs = preps[0].fs
     b = max(1, int(block * fs))
@@ -132,10 +215,264 @@ def equation_error(preps: list[Prepared], cyl: ph.Cylinder, P_atm: float, L: flo
     boots = np.array(boots)
     lo, hi = np.percentile(boots, [2.5, 97.5], axis=0)
     names = ("M", "K_v", "F_d", "F_L")
-    est = {k: Estimate(float(theta[j]), (float(lo[j]), float(hi[j])), UNITS[k]) for j, k in enumerate(names)}
+    est = {k: _widened(k, theta[j], min(lo[j], theta[j]), max(hi[j], theta[j])) for j, k in enumerate(names)}
     residual = y - X @ theta
     return est, {"samples": int(n), "condition_number": cond,
                  "rms_residual_N": float(np.sqrt(np.mean(residual**2)))}
+
+
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """The runs of True in ``mask`` as (first, end) index pairs."""
+    d = np.diff(np.concatenate(([0], mask.astype(int), [0])))
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
+
+
+#: Cut-off [Hz] of the low-pass filter through which velocities are compared.
+VE_CUTOFF = 30.0
+
+
+@dataclass
+class _Runs:
+    """One recording's sliding runs, ready for stage 2 and 3."""
+    p: Prepared
+    modes: Modes
+    spans: list            #: (first, end, direction) of each run long enough to use
+    F_p: np.ndarray        #: the pneumatic force [N] at each sample
+    v_meas: np.ndarray     #: the measured velocity, low-passed [m/s]
+    v_start: np.ndarray    #: the measured velocity, smoothed for start values [m/s]
+    reach: int             #: samples at each run's ends left out of the comparison
+
+
+def _sliding_runs(p: Prepared, cyl: ph.Cylinder, P_atm: float, L: float) -> _Runs:
+    modes = motion_modes(p, L)
+    reach = int(round(p.fs / VE_CUTOFF))
+    spans = [(i0, i1, d) for d in (1.0, -1.0) for i0, i1 in runs(modes.direction == d) if i1 - i0 > 3 * reach]
+    spans.sort()
+    xs = lowpass(p.x_raw, p.fs, MODE_CUTOFF)
+    return _Runs(p, modes, spans, ph.piston_force(p.p_a_raw, p.p_b_raw, cyl, P_atm),
+                 lowpass(np.gradient(p.x_raw, p.t), p.fs, VE_CUTOFF), np.gradient(xs, p.t), reach)
+
+
+def _net_force(r: _Runs, i0: int, i1: int, d: float, F_d: float, F_L: float) -> np.ndarray:
+    """The force that drives a run, each sample's value the mean of it and the next
+    (the force held over a sample interval, centred: a held sample would lag it)."""
+    phi = r.p.phi[i0:i1 + 1]
+    F = r.F_p[i0:i1 + 1] - F_L * np.sin(phi) - d * F_d * np.cos(phi)
+    if len(F) > i1 - i0:
+        return 0.5 * (F[:-1] + F[1:])
+    return np.concatenate((0.5 * (F[:-1] + F[1:]), F[-1:]))
+
+
+def _run_velocity(r: _Runs, theta) -> np.ndarray:
+    """Stage 2's simulated velocity over every run of one recording (0 elsewhere)."""
+    M, K_v, F_d, F_L = theta
+    v = np.zeros(len(r.p.t))
+    for i0, i1, d in r.spans:
+        v[i0:i1] = ph.sliding_velocity(r.v_start[i0], _net_force(r, i0, i1, d, F_d, F_L), K_v, M, r.p.dt)
+    return v
+
+
+def velocity_error(preps: list[Prepared], start: dict, cyl: ph.Cylinder, P_atm: float, L: float,
+                   n_boot: int = 300, seed: int = 0):
+    """Stage 2: M, K_v, F_d, F_L by velocity output error over every sliding run, from
+    ``start`` (stage 1); intervals from a bootstrap over the runs of the linearised
+    fit.  Returns ``(estimates, details)`` or ``(None, details)`` without usable runs."""
+    all_runs = [_sliding_runs(p, cyl, P_atm, L) for p in preps]
+    names = ("M", "K_v", "F_d", "F_L")
+    theta0 = np.array([start[k] for k in names])
+    # a start outside physics (the equation error on very little motion) is replaced:
+    # K_v from its magnitude, M for a 10 ms mechanical time constant, F_d 50 N
+    theta0[1] = abs(theta0[1]) or 1000.0
+    if not theta0[0] > 0.0:
+        theta0[0] = 0.01 * theta0[1]
+    if not theta0[2] > 0.0:
+        theta0[2] = 50.0
+    masks, labels = [], []
+    for j, r in enumerate(all_runs):
+        m = np.zeros(len(r.p.t), bool)
+        lab = np.full(len(r.p.t), -1)
+        for k, (i0, i1, _) in enumerate(r.spans):
+            m[i0 + r.reach:i1 - r.reach] = True
+            lab[i0:i1] = k + 1000 * j
+        masks.append(m)
+        labels.append(lab[m])
+    labels = np.concatenate(labels)
+    if len(labels) < 100:
+        return None, {"runs": int(sum(len(r.spans) for r in all_runs))}
+
+    def residuals(z):
+        theta = theta0 * np.exp(z)
+        return np.concatenate([(lowpass(_run_velocity(r, theta), r.p.fs, VE_CUTOFF) - r.v_meas)[m]
+                               for r, m in zip(all_runs, masks)])
+
+    res = least_squares(residuals, np.zeros(4), diff_step=1e-4, x_scale=1.0, max_nfev=50)
+    theta = theta0 * np.exp(res.x)
+    # bootstrap over the runs of the linearised problem around the optimum
+    J, f = res.jac, res.fun
+    groups = np.unique(labels)
+    index = {g: np.flatnonzero(labels == g) for g in groups}
+    rng = np.random.default_rng(seed)
+    boots = []
+    for _ in range(n_boot):
+        pick = np.concatenate([index[g] for g in rng.choice(groups, size=len(groups))])
+        dz, *_ = np.linalg.lstsq(J[pick], -f[pick], rcond=None)
+        boots.append(theta * np.exp(dz))
+    lo, hi = np.percentile(np.array(boots), [2.5, 97.5], axis=0)
+    est = {k: _widened(k, theta[j], min(lo[j], theta[j]), max(hi[j], theta[j])) for j, k in enumerate(names)}
+    return est, {"runs": int(len(groups)), "samples": int(len(f)), "evaluations": int(res.nfev),
+                 "rms_velocity_m_s": float(np.sqrt(np.mean(f ** 2)))}
+
+
+#: A start is a run after at least REST_BEFORE [s] of rest; the instant it starts is
+#: looked for from START_BACK [s] before the run is seen to START_AFTER after it.
+REST_BEFORE = 0.03
+SETTLE = 0.02
+START_BACK = 0.15
+START_AFTER = 0.06
+#: A start informs F_s only if the drive force stays below the static level for at
+#: least this many samples of the search window (else it jumped through it).
+INFORMATIVE_SAMPLES = 3
+#: Rests this close [m] to a stop do not bound F_s; F_s is looked for up to GRID_TOP F_d.
+STOP_ZONE = 1e-3
+GRID_TOP = 4.0
+#: How closely [m] the start's simulation can follow the piston (numerics, the other
+#: parameters' errors), and how many samples' misfits count as one (their errors are
+#: correlated): the likelihood's spread and tempering.
+MODEL_SPREAD = 2e-6
+TEMPER = 4.0
+OUTLIER = 1e-4   #: probability of a reading no model explains (a glitch)
+#: F_s's 95 % interval is reported as identifying it when narrower than this share of
+#: its value on either side.
+IDENTIFIED_WIDTH = 0.15
+
+
+def _starts(r: _Runs, L: float):
+    """Runs of ``r`` that follow a rest: (first sample of the search window, run start,
+    end of the comparison window, direction, run end).  The rest counts from SETTLE
+    after the motion before it fell below the threshold speed (the piston is still
+    creeping to a stop there), and must last REST_BEFORE from then."""
+    out = []
+    fs = r.p.fs
+    settle, rest, back = int(SETTLE * fs), int(REST_BEFORE * fs), int(START_BACK * fs)
+    for i0, i1, d in r.spans:
+        moving = np.flatnonzero(r.modes.sliding[:i0])
+        j = max(0, i0 - back, (int(moving[-1]) + 1 + settle) if len(moving) else 0)
+        if i0 - j < rest:
+            continue
+        out.append((j, i0, min(i1, i0 + int(START_AFTER * fs)), d, i1))
+    return out
+
+
+def static_friction(preps: list[Prepared], base: dict, cyl: ph.Cylinder, P_atm: float, L: float,
+                    n_grid: int = 400):
+    """Stage 3: F_s from every start (see the module's docstring).  Returns
+    ``(Estimate or None, identified, details)``."""
+    M, K_v, F_d, F_L = (base[k] for k in ("M", "K_v", "F_d", "F_L"))
+    events, lower = [], 0.0
+    for p in preps:
+        r = _sliding_runs(p, cyl, P_atm, L)
+        # the static level the drive force needs at each sample, in the run's direction
+        # (from the filtered pressures: the running maximum below would pick the
+        # noise's peaks and see every start early)
+        F_drive = ph.piston_force(p.p_a, p.p_b, cyl, P_atm) - F_L * np.sin(p.phi)
+        level = F_drive / np.cos(p.phi)
+        # the largest drive force held at rest in mid-stroke (away from the last
+        # samples before a start): a lower bound of F_s
+        # (a rest within STOP_ZONE of the stops, or of the extremes the recording
+        # reaches, may be a stop's: its reading carries the sensor's offset there)
+        xs = lowpass(p.x_raw, p.fs, MODE_CUTOFF)
+        low, high = max(0.0, float(xs.min())) + STOP_ZONE, min(L, float(xs.max())) - STOP_ZONE
+        held = ~_dilate(r.modes.sliding, int(START_BACK * p.fs)) & (xs > low) & (xs < high)
+        edge = int(0.1 * p.fs)          # the filter's reach at the recording's ends
+        held[:edge] = held[-edge:] = False
+        if held.any():
+            smooth = median_filter(level, size=int(0.02 * p.fs) | 1, mode="nearest")   # local: no reach into a start
+            lower = max(lower, float(np.max(np.abs(smooth[held]))))
+        for j, i0, ie, d, i1 in _starts(r, L):
+            need = d * level[j:ie]
+            before = need[:i0 - j]
+            if len(before) < INFORMATIVE_SAMPLES:
+                continue
+            # for each candidate start sample k: the run simulated from rest at k, as
+            # the position sensor would read it (its quantum q: a reading moves only
+            # once the piston has crossed the next level, and where within its
+            # quantum the piston rested is unknown: the best offset is taken)
+            n = ie - j
+            F_net = _net_force(r, j, ie, d, F_d, F_L)
+            moved = np.zeros((n, n))
+            for k in range(n - 1):
+                v = ph.sliding_velocity(0.0, F_net[k:], K_v, M, p.dt)
+                moved[k, k + 1:] = np.cumsum(0.5 * (v[:-1] + v[1:])) * p.dt
+            rest = p.x_raw[j:max(j + 1, i0 - int(0.01 * p.fs))]
+            reading = float(np.median(rest))
+            q = _quantum(p.x_raw[j:min(len(p.x_raw), ie + int(0.05 * p.fs))])
+            ll = _start_likelihood(moved, p.x_raw[j:ie], reading, q, float(np.std(rest)))
+            events.append((need, ll / TEMPER, ie - j, float(p.t[i0])))
+    if not events:
+        return None, False, {"starts": 0, "lower_bound_N": lower}
+    hi_level = max(float(np.max(e[0])) for e in events)
+    grid = np.linspace(F_d, max(min(hi_level, GRID_TOP * F_d), 1.5 * F_d), n_grid)
+    total = np.zeros(n_grid)
+    each = []
+    for need, ll_k, n, t_start in events:
+        reached = np.maximum.accumulate(need)
+        # first sample at which the drive force exceeds each F_s; beyond the window:
+        # the window's last start (the run is seen to move, so it started by then)
+        k = np.searchsorted(reached, grid, side="right")
+        # between samples: the crossing's fraction of the interval before sample k
+        prev = reached[np.clip(k - 1, 0, n - 1)]
+        step = reached[np.clip(k, 0, n - 1)] - prev
+        frac = np.where((k > 0) & (k < n) & (step > 0), (grid - prev) / np.where(step > 0, step, 1.0), 1.0)
+        k = np.clip(k, 0, n - 1)
+        ll = (1.0 - frac) * ll_k[np.clip(k - 1, 0, n - 1)] + frac * ll_k[k]
+        total += ll
+        each.append({"t_s": round(t_start, 4), "F_s_N": float(grid[int(np.argmax(ll))])})
+    # the posterior over the grid (uniform prior above the largest force held at rest)
+    total[grid < lower] = -np.inf
+    if not np.isfinite(total).any():
+        total[:] = 0.0
+    w = np.exp(total - np.max(total))
+    w /= w.sum()
+    cdf = np.cumsum(w)
+    F_s = float(w @ grid)
+    lo_F = float(grid[min(np.searchsorted(cdf, 0.025), n_grid - 1)])
+    hi_F = float(grid[min(np.searchsorted(cdf, 0.975), n_grid - 1)])
+    est = _widened("F_s", F_s, min(lo_F, F_s), max(hi_F, F_s))
+    identified = hi_F < grid[-2] and est.relative_halfwidth < IDENTIFIED_WIDTH
+    return est, identified, {"starts": len(events), "each": each, "lower_bound_N": lower,
+                             "grid_N": [float(grid[0]), float(grid[-1])]}
+
+
+def _start_likelihood(moved: np.ndarray, readings: np.ndarray, reading: float, q: float, spread: float):
+    """Log-likelihood of the position ``readings`` over a start's window under each
+    simulated displacement (rows of ``moved``, from the rest), for a sensor that adds
+    noise of ``spread`` [m] and rounds to a quantum ``q`` [m] (0: no rounding).  The
+    piston's true resting position relative to the reading levels (``reading`` is the
+    reading at rest) is unknown: uniform over a quantum (two where noise makes the
+    rest flicker), and marginalised, not profiled: a profile would favour starts that
+    one offset or another can excuse."""
+    sigma = math.hypot(spread, q / 20.0, MODEL_SPREAD)
+    if q <= 0.0:
+        return -np.sum((reading + moved - readings) ** 2, axis=1) / (2.0 * sigma ** 2)
+    span = 1.0 if spread < q / 4.0 else 2.0
+    lls = []
+    for offset in np.linspace(-0.5, 0.5, 11) * q * span:
+        mu = reading + offset + moved
+        prob = ndtr((readings + q / 2.0 - mu) / sigma) - ndtr((readings - q / 2.0 - mu) / sigma)
+        lls.append(np.sum(np.log(prob + OUTLIER), axis=1))
+    lls = np.array(lls)
+    top = lls.max(axis=0)
+    return top + np.log(np.mean(np.exp(lls - top), axis=0))
+
+
+def _quantum(x: np.ndarray) -> float:
+    """The step [m] between the position readings around a start (0 where they are not
+    quantised finer than noise shows): the smallest gap between distinct readings, if
+    the readings take few distinct values."""
+    levels = np.unique(x)
+    if len(levels) < 2 or len(levels) > len(x) // 3:
+        return 0.0
+    return float(np.min(np.diff(levels)))
 
 
 def breakaways(p: Prepared, L: float, rest: float = 0.05, lead: float = 0.08, q: float = 4e-4):
@@ -180,192 +517,6 @@ def simulate_load(p: Prepared, load: ph.Load, cyl: ph.Cylinder, geom: ph.Geometr
     return xs
 
 
-#: Departure from the resting reading [m] below which samples do not enter the output
-#: error: the resting reading carries the angle sensor's quantisation as an offset.
-DEPARTED = 2e-4
-
-
-def _rest(p: Prepared, i0: int, L: float) -> tuple[float, float]:
-    """(start position for the simulation, resting reading) of a window from i0: the
-    median reading over 50 ms, snapped onto a stop when within DEPARTED of it."""
-    reading = float(np.median(p.x_raw[i0:i0 + int(0.05 * p.fs)]))
-    x0 = 0.0 if reading < DEPARTED else (L if reading > L - DEPARTED else reading)
-    return x0, reading
-
-
-#: Shortest time [s] the drive force may take to cross the static band for a start to
-#: inform F_s.
-SLOW_START = 0.005
-
-
-def _crossing_time(p: Prepared, i: int, band: float, cyl, P_atm, F_L) -> float:
-    """Time [s] the drive force needs to cross ``band`` [N] at its rate around sample i."""
-    F = ph.drive_force(p.p_a, p.p_b, p.phi, 0.0, cyl, ph.Load(F_L=F_L), P_atm)
-    j0, j1 = max(0, i - int(0.03 * p.fs)), max(1, i - int(0.005 * p.fs))
-    rate = abs(float(np.mean(np.gradient(F[j0:j1 + 1], p.t[j0:j1 + 1]))))
-    return band / rate if rate > 0 else np.inf
-
-
-def _windows(preps, L, before=0.2, after=0.1, base=None, cyl=None, P_atm=None):
-    out = []
-    for p in preps:
-        for i in breakaways(p, L):
-            if base is not None:
-                band = 2.0 * base["F_d"] * float(np.cos(p.phi[i]))
-                if _crossing_time(p, i, band, cyl, P_atm, base["F_L"]) < SLOW_START:
-                    continue
-            i0 = max(0, i - int(before * p.fs))
-            i1 = min(len(p.t), i + int(after * p.fs))
-            x0, reading = _rest(p, i0, L)
-            moved = np.abs(p.x_raw[i0:i1] - reading) > DEPARTED
-            out.append((p, i0, i1, x0, moved))
-    return out
-
-
-_SCAN: dict = {}
-
-
-def _run_part(args):
-    k, theta = args
-    return _SCAN["part"](k, theta)
-
-
-class _Parts:
-    """``part(k, theta)`` for k = 0 .. n - 1 evaluated side by side in forked workers
-    (each inherits ``part`` and its data once; only parameters and results cross), or
-    in turn where the platform does not fork.  A context manager: ``with _Parts(part, n)
-    as run: run(theta) -> [part(0, theta), ...]``."""
-
-    def __init__(self, part, n: int):
-        self.part, self.n, self.pool = part, n, None
-        if n > 1 and "fork" in multiprocessing.get_all_start_methods():
-            _SCAN["part"] = part
-            self.pool = ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("fork"))
-
-    def __call__(self, theta) -> list:
-        if self.pool is None:
-            return [self.part(k, theta) for k in range(self.n)]
-        return list(self.pool.map(_run_part, [(k, theta) for k in range(self.n)]))
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        if self.pool is not None:
-            self.pool.shutdown()
-            _SCAN.pop("part", None)
-
-
-def _workers(n_items: int) -> int:
-    return max(1, min(os.cpu_count() or 1, n_items))
-
-
-def scan(cost, grid) -> list[float]:
-    """``cost`` at every point of ``grid``, the points dealt over the cores."""
-    n, grid = _workers(len(grid)), list(grid)
-    with _Parts(lambda k, g: [cost(v) for v in g[k::n]], n) as run:
-        parts = run(grid)
-    out = [0.0] * len(grid)
-    for k, part in enumerate(parts):
-        out[k::n] = part
-    return out
-
-
-def _balanced(sizes: list, n: int) -> list[list[int]]:
-    """The indices of ``sizes`` dealt into ``n`` ascending lists of about equal total
-    size (the largest first, each to the lightest list)."""
-    parts, load = [[] for _ in range(n)], [0] * n
-    for i in sorted(range(len(sizes)), key=lambda i: -sizes[i]):
-        k = load.index(min(load))
-        parts[k].append(i)
-        load[k] += sizes[i]
-    return [sorted(part) for part in parts]
-
-
-def fit_static_friction(preps, base: dict, cyl, geom, P_atm, L):
-    """Stage 2: F_s by matching simulated starts to recorded ones."""
-    all_starts = len(_windows(preps, L))
-    wins = _windows(preps, L, base=base, cyl=cyl, P_atm=P_atm)
-    if not wins:
-        wins = _windows(preps, L)
-    if not wins:
-        return None, {"breakaways": 0}
-
-    def cost(F_s):
-        load = ph.Load(K_v=base["K_v"], F_s=F_s, F_d=base["F_d"], F_L=base["F_L"], M=base["M"])
-        return sum(float(np.sum(((simulate_load(p, load, cyl, geom, P_atm, i0, i1, x0) - p.x_raw[i0:i1])[moved]) ** 2))
-                   for p, i0, i1, x0, moved in wins)
-
-    # F_s is not below F_d: a piston that broke away below the Coulomb level would stop
-    # again at once (Eq. 9), so such an F_s could never be seen
-    lo, hi = max(base["F_d"], 0.0), 3.0 * max(base["F_d"], 50.0)
-    # the cost is rough (starts happen on a time grid), so scan first, then refine
-    # around the best point of the scan
-    grid = np.linspace(lo, hi, 41)
-    costs = scan(cost, grid)
-    j = int(np.argmin(costs))
-    step = grid[1] - grid[0]
-    res = minimize_scalar(cost, bounds=(max(lo, grid[j] - step), min(hi, grid[j] + step)),
-                          method="bounded", options={"xatol": 0.01})
-    if res.fun > costs[j]:
-        res.x, res.fun = grid[j], costs[j]
-    F_s = float(res.x)
-    # interval: curvature of the cost with the residual variance and correlation
-    h = max(0.5, 0.01 * F_s)
-    c0, cp, cm = res.fun, cost(F_s + h), cost(F_s - h)
-    n = sum(int(moved.sum()) for *_, moved in wins)
-    curv = max((cp - 2 * c0 + cm) / h**2, 1e-30)
-    sigma2 = c0 / max(n - 1, 1)
-    half = 1.96 * math.sqrt(2.0 * sigma2 * correlation_samples(preps[0]) / curv)
-    return Estimate(F_s, (F_s - half, F_s + half), "N"), {"breakaways": all_starts, "used": len(wins)}
-
-
-def refine(preps, start: dict, cyl, geom, P_atm, L):
-    """Stage 3: all five by output error on the whole trajectories (boom driven by the
-    recorded pressures, restarted from the recorded position at each rest)."""
-    segments = []
-    for p in preps:
-        idx = breakaways(p, L)
-        bounds = idx + [len(p.t)]
-        for j, i in enumerate(idx):
-            i0 = max(0, i - int(0.2 * p.fs))
-            i1 = min(bounds[j + 1], i + int(1.5 * p.fs), len(p.t))
-            x0, reading = _rest(p, i0, L)
-            segments.append((p, i0, i1, x0, np.abs(p.x_raw[i0:i1] - reading) > DEPARTED))
-    names = ("K_v", "F_d", "F_L", "M")
-    x0 = np.array([start[k] for k in names])
-    n = _workers(len(segments))
-    dealt = _balanced([i1 - i0 for _, i0, i1, _, _ in segments], n)
-    parts = [[segments[i] for i in idx] for idx in dealt]
-    order = np.argsort(np.concatenate(dealt))     # back to the segments' own order
-
-    def part_residuals(k, theta):
-        load = ph.Load(F_s=start["F_s"], **dict(zip(names, theta)))
-        return [(simulate_load(p, load, cyl, geom, P_atm, i0, i1, xs) - p.x_raw[i0:i1])[moved]
-                for p, i0, i1, xs, moved in parts[k]]
-
-    with _Parts(part_residuals, n) as run:
-        def residuals(theta):
-            pieces = [r for part in run(theta) for r in part]
-            return np.concatenate([pieces[i] for i in order])
-
-        res = least_squares(residuals, x0, x_scale=np.abs(x0) + 1e-9, bounds=(1e-9, np.inf),
-                            diff_step=1e-3, max_nfev=60)
-    J = res.jac
-    dof = max(len(res.fun) - len(names), 1)
-    sigma2 = float(res.fun @ res.fun) / dof
-    try:
-        cov = np.linalg.inv(J.T @ J) * sigma2 * correlation_samples(preps[0])
-    except np.linalg.LinAlgError:
-        cov = np.full((len(names), len(names)), np.inf)
-    est = {}
-    for j, k in enumerate(names):
-        half = 1.96 * math.sqrt(max(cov[j, j], 0.0))
-        est[k] = Estimate(float(res.x[j]), (float(res.x[j] - half), float(res.x[j] + half)), UNITS[k])
-    return est, {"segments": len(segments), "rms_x_m": float(np.sqrt(np.mean(res.fun ** 2))),
-                 "evaluations": int(res.nfev)}
-
-
 def fit_A_max(preps: list[Prepared], cyl: ph.Cylinder, valve: ph.Valve, gas: ph.Gas):
     """The valve's A_max from the chambers' mass balance: the measured inflow
     ``(V dp/dt + k p dV/dt) / (k R T)`` against Eq. 1's flow per unit area."""
@@ -393,31 +544,30 @@ def fit_A_max(preps: list[Prepared], cyl: ph.Cylinder, valve: ph.Valve, gas: ph.
 def identify(preps: list[Prepared], cyl: ph.Cylinder = ph.Cylinder(), geom: ph.Geometry = ph.Geometry(),
              P_atm: float = reference_rig.P_atm, refine_all: bool = True, with_A_max: bool = False,
              valve: ph.Valve = ph.Valve(), gas: ph.Gas = ph.Gas()) -> FitResult:
-    """The sound method on prepared recordings; see the module's docstring."""
+    """The sound method on prepared recordings; see the module's docstring.
+    ``refine_all=False`` stops after stage 1 (and F_s)."""
     L = cyl.L
     est, info = equation_error(preps, cyl, P_atm, L)
-    base = {k: e.value for k, e in est.items()}
-    F_s, info2 = fit_static_friction(preps, base, cyl, geom, P_atm, L)
+    details = {"equation_error": info}
     warnings = []
+    if refine_all:
+        refined, info2 = velocity_error(preps, {k: e.value for k, e in est.items()}, cyl, P_atm, L)
+        details["velocity_error"] = info2
+        if refined is None:
+            warnings.append("too few runs of motion for the velocity fit: the load is from the equation error alone")
+        else:
+            est.update(refined)
+    F_s, identified, info3 = static_friction(preps, {k: e.value for k, e in est.items()}, cyl, P_atm, L)
+    details["static_friction"] = dict(info3, identified=bool(identified))
     if F_s is None:
         warnings.append("no start of motion from rest: F_s cannot be identified; F_d is used in its place")
-        F_s = Estimate(base["F_d"], (math.nan, math.nan), "N")
+        F_s = Estimate(est["F_d"].value, (math.nan, math.nan), "N")
+    elif not identified:
+        warnings.append(f"the data cannot tell F_s: the starts they hold put it anywhere in "
+                        f"[{F_s.ci95[0]:.4g}, {F_s.ci95[1]:.4g}] N (a start informs F_s only where the drive "
+                        f"force rises slowly through the static level, as after a hold with a small opening); "
+                        f"the model uses {F_s.value:.4g} N, and no other parameter depends on it")
     est["F_s"] = F_s
-    details = {"equation_error": info, "static_friction": info2}
-    if refine_all and info2.get("breakaways", 0) > 0 and all(v > 0 for v in base.values()):
-        # stages 3 and 2 in turn: the trajectory fit with F_s held, then F_s again with
-        # the refined dynamics (a start's timing depends on M and F_d as well)
-        for _ in range(2):
-            start = {k: est[k].value for k in PARAMS}
-            refined, info3 = refine(preps, start, cyl, geom, P_atm, L)
-            for k in refined:
-                width = min(refined[k].ci95[1] - refined[k].ci95[0], est[k].ci95[1] - est[k].ci95[0])
-                est[k] = Estimate(refined[k].value, (refined[k].value - width / 2, refined[k].value + width / 2),
-                                  UNITS[k])
-            F_s, info2 = fit_static_friction(preps, {k: e.value for k, e in est.items()}, cyl, geom, P_atm, L)
-            est["F_s"] = F_s
-        details["output_error"] = info3
-        details["static_friction"] = info2
     if with_A_max:
         a_max = fit_A_max(preps, cyl, valve, gas)
         if a_max is None:
@@ -425,7 +575,7 @@ def identify(preps: list[Prepared], cyl: ph.Cylinder = ph.Cylinder(), geom: ph.G
         else:
             est["A_max"] = a_max
     for k, e in est.items():
-        if not e.relative_halfwidth < 0.5:
+        if k != "F_s" and not e.relative_halfwidth < 0.5:
             warnings.append(f"the data cannot identify {k}: its 95 % interval "
                             f"[{e.ci95[0]:.4g}, {e.ci95[1]:.4g}] {e.unit} is wider than half its value")
     ordered = {k: est[k] for k in (*PARAMS, "A_max") if k in est}

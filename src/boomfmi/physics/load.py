@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from . import _xp as xp
 from .geometry import phi_from_x
 from .params import Cylinder, Geometry, Load
@@ -88,6 +90,24 @@ def _time_to_rest(v0: float, F_net: float, K_v: float, M: float) -> float:
     if q > 1e-12:
         return M * math.log1p(q) / K_v
     return -M * v0 / F_net
+
+
+def sliding_velocity(v0, F_net, K_v: float, M: float, dt: float):
+    """Eq. 8 while sliding one way, along a sampled force: the velocity [m/s] at every
+    sample of ``F_net`` [N] (the drive force minus the Coulomb friction F_d cos(phi)
+    against the motion; sample k held over [t_k, t_k+1]), from ``v0`` [m/s] at the
+    first sample, with viscous friction ``K_v`` [N s/m] and mass ``M`` [kg].  Exact for
+    a held force (``_slide``'s velocity, run as one linear recursive filter)::
+
+        v[k+1] = e v[k] + (1 - e) F_net[k] / K_v,   e = exp(-K_v dt / M)
+
+    ``F_net`` may be 2-D: one force history per row (``v0`` a scalar or one per row)."""
+    from scipy.signal import lfilter
+    e = math.exp(-K_v * dt / M)
+    F_net = np.asarray(F_net, dtype=float)
+    zi = np.broadcast_to(np.asarray(v0, dtype=float), F_net.shape[:-1])[..., None].copy()
+    v, _ = lfilter([0.0, (1.0 - e) / K_v], [1.0, -e], F_net, axis=-1, zi=zi)
+    return v
 
 
 def slide_or_stick(v: float, F_drive: float, cos_phi: float, dt: float,
