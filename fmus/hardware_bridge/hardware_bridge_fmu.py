@@ -25,8 +25,9 @@ Modes (parameter ``mode``):
   fmi2Error.
 
 Unmodelled effect, off by default: ``tau_sensor`` > 0 passes p_a, p_b and alpha (and
-so x) through a first-order lag, the sensors and their conditioning (sensor_lag,
-``physics/effects.py``).
+so x) through a first-order lag, the sensors and their conditioning, and
+``delay_sensor`` > 0 delays them by a dead time before it (sensor_lag,
+``physics/effects.py``, ``physics/lag.py``).
 """
 import bisect
 import time
@@ -38,6 +39,7 @@ from boomfmi_hardware_bridge_lib.link.protocol import LinkError, load_key
 from boomfmi_hardware_bridge_lib.physics import Geometry, ParameterError, check_geometry, x_from_alpha
 from boomfmi_hardware_bridge_lib.physics import reference_rig
 from boomfmi_hardware_bridge_lib.physics.effects import sensor_lag_step
+from boomfmi_hardware_bridge_lib.physics.lag import DelayLine
 from boomfmi_hardware_bridge_lib.recording import RecordingError, parse_recording
 
 MEASURED = ("p_a", "p_b", "alpha", "f_ext")
@@ -77,9 +79,11 @@ class HardwareBridge(BoomSlave):
         self._geom = Geometry()
         self._losses = 0
         self._t_meas = None
+        self._delay = None
 
     # -- set-up ----------------------------------------------------------------------------
     def setup(self):
+        self._delay = DelayLine(self.delay_sensor) if self.delay_sensor > 0.0 else None
         self._geom = Geometry(a=self.a, b=self.b, h=self.h, l_min=self.l_min)
         check_geometry(self._geom, self.L)
         if self.mode == "replay":
@@ -161,7 +165,11 @@ class HardwareBridge(BoomSlave):
         return None
 
     def _measured(self, p_a, p_b, alpha, t):
-        """Set the measured outputs, through the sensor lag when it is on."""
+        """Set the measured outputs, through the sensor lag (dead time, then the
+        first-order lag) when it is on."""
+        if self._delay is not None:
+            self._delay.push(t, (p_a, p_b, alpha))
+            p_a, p_b, alpha = self._delay.read(t)
         tau = self.tau_sensor
         if tau > 0.0 and self._t_meas is not None and t > self._t_meas:
             dt = t - self._t_meas

@@ -51,23 +51,50 @@ def initial_state(rec: Recording, rig: Model | None = None) -> tuple[float, floa
     return (x0, float(rec.data["p_a"].iloc[0]) + rig.P_atm, float(rec.data["p_b"].iloc[0]) + rig.P_atm)
 
 
+#: A change of the recorded command [V] from one sample to the next beyond which it is a
+#: step (the solver restarts there); smaller changes, as of a sine sweep, are followed
+#: as a ramp through the samples.
+U_STEP = 0.25
+
+
 def simulate_recording(values: dict, rec: Recording, effects: dict | None = None, rtol: float = 1e-9,
                        rig: Model | None = None):
     """The model with ``values`` (and ``effects``) at the recording's rig, driven by its
-    command (u held between samples), on its times; pressures gauge like the recording.
-    ``rig``: the recording's :func:`rig_model`, where the caller has it already."""
+    command, on its times; pressures gauge like the recording.  The command is held
+    between samples, as the rig's output card holds it; where it moves by less than
+    ``U_STEP`` from one sample to the next, the staircase is followed as the ramp
+    through its steps' midpoints (half a sample later than the samples: the staircase's
+    mean delay), so that the solver need not restart at every sample.  ``rig``: the
+    recording's :func:`rig_model`, where the caller has it already."""
     rig = rig if rig is not None else rig_model(rec)
     t = rec.data["t"].to_numpy(dtype=float)
     u = rec.data["u"].to_numpy(dtype=float)
-    changes = t[1:][np.diff(u) != 0]
+    jumps = np.abs(np.diff(u)) > U_STEP
+    changes = t[1:][jumps]
+    small = np.flatnonzero((np.diff(u) != 0) & ~jumps)
+    t0 = t[0]
 
     def command(s):
-        i = max(0, int(np.searchsorted(t, s + 1e-9, side="right")) - 1)
+        i = max(0, int(np.searchsorted(t, s + t0 + 1e-9, side="right")) - 1)
         return {"u": float(u[i])}
+    u_between = None
+    if len(small):
+        # the ramp within each stretch between steps: knots at the samples' midpoints,
+        # never interpolated across a step
+        seg = np.concatenate(([0], np.cumsum(jumps)))      # the stretch of each sample
+        mid = t - t0 + 0.5 * np.median(np.diff(t))
+
+        def u_between(s):
+            i = max(0, int(np.searchsorted(t, s + t0 + 1e-9, side="right")) - 1)
+            j = i + 1 if s >= mid[i] else i - 1          # the neighbouring knot on s's side
+            if j < 0 or j >= len(u) or seg[j] != seg[i]:
+                return float(u[i])                       # at a stretch's end: held
+            return float(u[i] + (s - mid[i]) / (mid[j] - mid[i]) * (u[j] - u[i]))
     model = model_for(values, effects, rig)
     model.x0, model.p_a0, model.p_b0 = initial_state(rec, rig)
-    sim = simulate_reference(model, command, float(t[-1]), times=t - t[0], breakpoints=changes - t[0],
-                             rtol=rtol)
+    sim = simulate_reference(model, command, float(t[-1] - t0), times=t - t0, breakpoints=changes - t0,
+                             rtol=rtol, u_between=u_between,
+                             max_step=np.inf if u_between is None else 2.0 * float(np.median(np.diff(t))))
     sim["p_a"] -= rig.P_atm
     sim["p_b"] -= rig.P_atm
     return sim

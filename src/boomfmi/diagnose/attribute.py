@@ -32,9 +32,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
-from ..compare import CHANNELS, nrmse, recorded, shrink, simulate_recording
-from ..identify.preprocess import lowpass
-from ..model import EFFECTS, lagged
+from ..compare import CHANNELS, nrmse, recorded, rig_model, shrink, simulate_recording
+from ..identify.fit import identify
+from ..identify.preprocess import lowpass, prepare
+from ..model import EFFECTS, measure
 
 #: name -> [(parameter, lower, upper, log scale)] of its first law, from the catalogue
 CANDIDATES = {name: [(p.name, p.lower, p.upper, p.log) for p in e.forms[0]] for name, e in EFFECTS.items()}
@@ -46,7 +47,9 @@ NOISE_FACTOR = 3.0
 ABS_FLOOR = 0.002
 MIN_SHRINK = 0.35
 MIN_SHRINK_SECOND = 0.4     #: the share of the gap left by the best that a second effect must remove
-PAIR_TRIES = 3              #: the candidates tried as a second effect
+PAIR_POOL = 3               #: the candidates among which pairs are tried
+SCREEN_POINTS = 4           #: points per parameter that screen an effect's range
+SCREEN = 0.02               #: the share of the fit error a screened point must remove to go on
 RTOL = 1e-5            #: the reference solver's tolerance when scoring
 FIT_RTOL = 1e-4        #: and while fitting (each fit runs the model a dozen times or more)
 
@@ -55,12 +58,13 @@ def errors(values: dict, effects: dict, rec, rtol: float = RTOL) -> dict:
     """NRMSE per channel of the model (``values`` and ``effects``) on one recording.
 
     The sensor lag acts on the measured channels only, after the physics: with it
-    alone, the model runs once (cached) and only the filter varies."""
+    alone, the model runs once (cached) and only the measurement path varies."""
     only_lag = set(effects) == {"sensor_lag"}
     sim = _baseline(values, rec, rtol) if only_lag else simulate_recording(values, rec, effects=effects, rtol=rtol)
     if only_lag:
         t = sim["time"].to_numpy()
-        sim = {c: lagged(sim[c].to_numpy(), t, effects["sensor_lag"]["tau"]) for c in CHANNELS}
+        q = effects["sensor_lag"]
+        sim = {c: measure(sim[c].to_numpy(), t, q.get("tau", 0.0), q.get("delay", 0.0)) for c in CHANNELS}
     return nrmse(sim, rec)
 
 
@@ -97,17 +101,26 @@ class Candidate:
     holdout: dict = field(default_factory=dict)
     shrink: float = 0.0
     score: float = 0.0
+    values: dict | None = None   #: the baseline re-identified with the effect (None: the common one)
 
 
 def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = None,
-                fixed: dict | None = None, forms: dict | None = None) -> tuple[dict, float]:
+                fixed: dict | None = None, forms: dict | None = None,
+                baseline_cost: float | None = None) -> tuple[dict, float]:
     """Fit the parameters of the effects ``names`` together on the fit recordings:
-    ``({name: {param: value}}, cost)``.  One parameter: a bounded scalar search.  More:
-    Nelder-Mead from ``start`` (``{name: {param: value}}``, e.g. each effect's own fit),
-    or else from the best point of a coarse grid (4 levels per parameter), since the
-    cost of a two-parameter effect such as the cushion is a narrow valley.  ``fixed``:
-    further effects switched on with their parameters held (returned with the fit).
-    ``forms``: {name: [(param, lower, upper, log)]} in place of CANDIDATES[name]."""
+    ``({name: {param: value}}, cost)``.
+
+    Without ``start``, the parameters' ranges are screened first: a few points spread
+    over them (``SCREEN_POINTS`` per parameter, on a log scale where the catalogue says
+    so).  Where none of them lowers the fit recordings' error below ``baseline_cost``
+    (the model without the effects) by ``SCREEN`` of it, the effect explains nothing
+    there and the best screened point is returned as it is; else the fit goes on from
+    the best point: a bounded scalar search around it for one parameter, Nelder-Mead
+    for more (the cushion's cost is a narrow valley).  ``start``
+    (``{name: {param: value}}``, e.g. each effect's own fit) starts Nelder-Mead there.
+    ``fixed``: further effects switched on with their parameters held (returned with
+    the fit).  ``forms``: {name: [(param, lower, upper, log)]} in place of
+    CANDIDATES[name]."""
     spec = [(n, *s) for n in names for s in (forms or {}).get(n, CANDIDATES[n])]
 
     def to_effects(z):
@@ -121,21 +134,27 @@ def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = N
         return sum(v * v for v in e.values())
 
     bounds = [(math.log10(lo), math.log10(hi)) if log else (lo, hi) for _, _, lo, hi, log in spec]
-    if len(spec) == 1:
-        res = minimize_scalar(lambda v: cost([v]), bounds=bounds[0], method="bounded",
-                              options={"xatol": 0.02 * (bounds[0][1] - bounds[0][0])})
-        z, fun = [res.x], res.fun
-    else:
-        if start is not None:
-            z0 = [min(max(math.log10(start[n][p]) if log else start[n][p], b[0]), b[1])
-                  for (n, p, lo, hi, log), b in zip(spec, bounds)]
-        else:
-            levels = [np.linspace(lo, hi, 6)[1:-1] for lo, hi in bounds]
-            z0 = list(min(itertools.product(*levels), key=cost))
+    if start is not None:
+        z0 = [min(max(math.log10(start[n][p]) if log else start[n][p], b[0]), b[1])
+              for (n, p, lo, hi, log), b in zip(spec, bounds)]
         res = minimize(cost, z0, method="Nelder-Mead", bounds=bounds,
                        options={"maxfev": 40, "xatol": 1e-3, "fatol": 1e-9})
-        z, fun = res.x, res.fun
-    return to_effects(z), float(fun)
+        return to_effects(res.x), float(res.fun)
+    points = SCREEN_POINTS if len(spec) == 1 else SCREEN_POINTS - 1
+    levels = [lo + (np.arange(points) + 0.5) / points * (hi - lo) for lo, hi in bounds]
+    screened = [(cost(z), list(z)) for z in itertools.product(*levels)]
+    fun, z0 = min(screened, key=lambda c: c[0])
+    if baseline_cost is not None and fun > (1.0 - SCREEN) * baseline_cost:
+        return to_effects(z0), float(fun)
+    if len(spec) == 1:
+        lo, hi = bounds[0]
+        step = (hi - lo) / points
+        res = minimize_scalar(lambda v: cost([v]), bounds=(max(lo, z0[0] - step), min(hi, z0[0] + step)),
+                              method="bounded", options={"xatol": 0.02 * (hi - lo)})
+        return (to_effects([res.x]), float(res.fun)) if res.fun < fun else (to_effects(z0), float(fun))
+    res = minimize(cost, z0, method="Nelder-Mead", bounds=bounds,
+                   options={"maxfev": 30, "xatol": 1e-3, "fatol": 1e-9})
+    return (to_effects(res.x), float(res.fun)) if res.fun < fun else (to_effects(z0), float(fun))
 
 
 @dataclass
@@ -145,20 +164,67 @@ class Attribution:
     gap: bool
     candidates: list
     verdict: list
+    threshold: float = 0.0    #: the summed NRMSE a gap must exceed
+    spread: dict = field(default_factory=dict)   #: the baseline's own uncertainty, per channel
 
 
 def _fit_and_score(args):
-    name, values, fit_recs, hold_recs, fixed = args
-    fx, cost = min((fit_effects([name], values, fit_recs, fixed=fixed, forms={name: form})
-                    for form in FORMS.get(name, [CANDIDATES[name]])), key=lambda fit: fit[1])
-    return name, fx, cost, mean_errors(values, fx, hold_recs)
+    name, values, fit_recs, hold_recs, fixed, base_cost = args
+    if EFFECTS[name].stage == "friction" and not fixed:
+        return _fit_friction(name, fit_recs, hold_recs)
+    fits = []
+    for form in FORMS.get(name, [CANDIDATES[name]]):
+        # a law that holds another's parameters and more (a leak both laminar and
+        # turbulent) is tried only where a law it holds explains something
+        subsets = [f for f in fits if set(f[2]) < {q[0] for q in form}]
+        if subsets and not any(f[1] <= (1.0 - SCREEN) * base_cost for f in subsets):
+            continue
+        fx, cost = fit_effects([name], values, fit_recs, fixed=fixed, forms={name: form}, baseline_cost=base_cost)
+        fits.append((fx, cost, [q[0] for q in form]))
+    fx, cost, _ = min(fits, key=lambda f: f[1])
+    return name, fx, cost, mean_errors(values, fx, hold_recs), None
+
+
+def _fit_friction(name, fit_recs, hold_recs):
+    """A friction effect fitted jointly with the baseline it changes: for each value of
+    its parameter (the Stribeck velocity, on a log grid, then refined) the load is
+    identified anew with the effect in Eq. 8 and 9 (``identify.fit.identify``), and the
+    value whose identification fits the recorded velocities best is kept, with its
+    load.  A baseline identified without the effect would have absorbed part of it
+    (F_s, M) and hidden the rest."""
+    (param, lo, hi, log), = CANDIDATES[name]
+    rig = rig_model(fit_recs[0])
+    preps = [prepare(r, geometry=rig.geometry, P_atm=rig.P_atm) for r in fit_recs]
+    seen = {}
+
+    def misfit(z):
+        v_s = float(10 ** z)
+        if v_s not in seen:
+            res = identify(preps, rig.cylinder, rig.geometry, rig.P_atm, valve=rig.valve, gas=rig.gas, v_s=v_s)
+            seen[v_s] = (res.details.get("velocity_error", {}).get("rms_velocity_m_s", math.inf), res.values())
+        return seen[v_s][0]
+    plain = identify(preps, rig.cylinder, rig.geometry, rig.P_atm, valve=rig.valve, gas=rig.gas)
+    rms0 = plain.details.get("velocity_error", {}).get("rms_velocity_m_s", math.inf)
+    zs = np.linspace(math.log10(lo), math.log10(hi), 6)
+    costs = [misfit(z) for z in zs]
+    i = int(np.argmin(costs))
+    if costs[i] < (1.0 - SCREEN) * rms0:       # the curve explains something: refine
+        minimize_scalar(misfit, bounds=(zs[max(i - 1, 0)], zs[min(i + 1, len(zs) - 1)]), method="bounded",
+                        options={"xatol": 0.05})
+    v_s = min(seen, key=lambda k: seen[k][0])
+    joint = {k: v for k, v in seen[v_s][1].items() if math.isfinite(v)}
+    fx = {name: {param: v_s}}
+    cost = sum(e * e for e in mean_errors(joint, fx, fit_recs, FIT_RTOL).values())
+    return name, fx, cost, mean_errors(joint, fx, hold_recs), joint
 
 
 def _cost(job) -> int:
     """A fit's rough cost, for scheduling: steep in its parameters (a grid, then a
-    simplex), times its laws."""
-    name = job[0]
-    return len(CANDIDATES[name]) ** 3 * len(FORMS.get(name, [None]))
+    simplex), times its laws; 1 for a job that is not a fit."""
+    if not isinstance(job[0], (str, list)):
+        return 1
+    names = job[0] if isinstance(job[0], list) else [job[0]]
+    return sum(max(len(f) for f in FORMS.get(n, [CANDIDATES[n]])) ** 3 * len(FORMS.get(n, [None])) for n in names)
 
 
 def _map(fn, jobs, workers):
@@ -172,19 +238,55 @@ def _map(fn, jobs, workers):
     return [fn(j) for j in jobs]
 
 
-def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None = None) -> Attribution:
+def baseline_spread(values: dict, intervals: dict, recs, workers: int = 1) -> dict:
+    """How far the baseline's own uncertainty moves its prediction of ``recs``: per
+    channel, the NRMSE between the model at ``values`` and at each identified parameter
+    moved to the nearer end of its 95 % interval (``intervals``: name -> (lo, hi)),
+    combined in quadrature.  A gap smaller than this is not beyond what the
+    identification already leaves open."""
+    names = [k for k, (lo, hi) in intervals.items()
+             if k in values and math.isfinite(lo) and math.isfinite(hi) and hi > lo]
+    if not names:
+        return {c: 0.0 for c in CHANNELS}
+    jobs = [(values, k, intervals[k], recs) for k in names]
+    moved = _map(_moved_error, jobs, workers)
+    return {c: float(math.sqrt(sum(m[c] ** 2 for m in moved))) for c in CHANNELS}
+
+
+def _moved_error(job) -> dict:
+    values, name, (lo, hi), recs = job
+    v = values[name]
+    step = min(abs(v - lo), abs(hi - v))
+    other = dict(values, **{name: v + step if abs(hi - v) <= abs(v - lo) else v - step})
+    if name == "F_s":
+        other[name] = max(other[name], values.get("F_d", 0.0))
+    per = []
+    for r in recs:
+        a = _baseline(values, r, RTOL)
+        b = simulate_recording(other, r, rtol=RTOL)
+        span = recorded(r)
+        per.append({c: float(np.sqrt(np.mean((b[c].to_numpy() - a[c].to_numpy()) ** 2))
+                             / max(float(np.ptp(span[c])), 1e-12)) for c in CHANNELS})
+    return {c: float(np.mean([e[c] for e in per])) for c in CHANNELS}
+
+
+def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None = None,
+              intervals: dict | None = None) -> Attribution:
     """Fit, score and rank the candidates (``workers`` processes at once; default: one
-    per core); decide the verdict."""
+    per core); decide the verdict.  ``intervals``: the baseline's 95 % intervals
+    (name -> (lo, hi)), whose effect on the holdout raises the gap's threshold."""
     names = list(CANDIDATES) if names is None else names
+    workers = workers or os.cpu_count() or 1
     before = mean_errors(values, {}, hold_recs)
     floors = [noise_floor(r) for r in hold_recs]
     noise = {c: float(np.mean([f[c] for f in floors])) for c in CHANNELS}
-    threshold = NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR
+    spread = baseline_spread(values, intervals or {}, hold_recs, workers)
+    threshold = NOISE_FACTOR * sum(noise.values()) + sum(spread.values()) + ABS_FLOOR
     gap = sum(before.values()) > threshold
-    workers = workers or os.cpu_count() or 1
-    fitted = _map(_fit_and_score, [(n, values, fit_recs, hold_recs, None) for n in names], workers)
-    cands = [Candidate(n, fx[n], cost, after, shrink(before, after))
-             for n, fx, cost, after in fitted]
+    base_cost = sum(e * e for e in mean_errors(values, {}, fit_recs, FIT_RTOL).values())
+    fitted = _map(_fit_and_score, [(n, values, fit_recs, hold_recs, None, base_cost) for n in names], workers)
+    cands = [Candidate(n, fx[n], cost, after, shrink(before, after), values=joint)
+             for n, fx, cost, after, joint in fitted]
     cands.sort(key=lambda c: -c.shrink)
     weights = [max(c.shrink, 0.0) ** 2 for c in cands]
     total_w = sum(weights) or 1.0
@@ -194,32 +296,53 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     verdict: list = []
     if gap and cands:
         best = cands[0]
-        if best.shrink >= MIN_SHRINK:
+        pair = None
+        if best.shrink < MIN_SHRINK or sum(best.holdout.values()) > threshold:
+            pair = _pairs(cands, values, fit_recs, hold_recs, before, threshold, workers)
+        if pair is not None:
+            pair.score = round(min(1.0, pair.shrink / MIN_SHRINK), 4)
+            verdict = pair.name.split("+")
+            cands.insert(0, pair)
+        elif best.shrink >= MIN_SHRINK:
             verdict = [best.name]
-            pair = _second_effect(best, cands[1:], values, fit_recs, hold_recs, before, threshold, workers)
-            if pair is not None:
-                pair.score = round(best_strength, 4)
-                verdict = pair.name.split("+")
-                cands.insert(0, pair)
         else:
             verdict = ["unexplained"]
-    return Attribution(before, noise, gap, cands, verdict)
+    att = Attribution(before, noise, gap, cands, verdict)
+    att.threshold, att.spread = threshold, spread
+    return att
 
 
-def _second_effect(best, others, values, fit_recs, hold_recs, before, threshold, workers):
-    """A second effect beside ``best``, where the gap left by ``best`` alone is still
-    beyond the noise: each of the next candidates that helped on its own is fitted with
-    ``best`` held on; the pair is kept when the second removes at least
-    ``MIN_SHRINK_SECOND`` of what ``best`` left (on the holdout recordings)."""
-    left = sum(best.holdout.values())
-    if left <= threshold:
+def _pairs(cands, values, fit_recs, hold_recs, before, threshold, workers):
+    """The best pair of effects, where no single one explains the gap or the best leaves
+    one beyond the noise.  Pairs are drawn among the PAIR_POOL candidates that helped
+    most on their own (not only beside the best: two effects may each explain too
+    little alone), fitted jointly from their single fits.  A pair is kept only if it
+    removes MIN_SHRINK of the gap and each of its effects pays for itself: removes at
+    least MIN_SHRINK_SECOND of what the other one alone leaves (the penalty that keeps
+    noise from being explained by a second effect)."""
+    pool = [c for c in cands if c.shrink > 0.0][:PAIR_POOL]
+    by_name = {c.name: c for c in cands}
+    # a pair with a friction effect keeps the load identified with it
+    jobs = [([a.name, b.name], a.values or b.values or values, fit_recs, hold_recs,
+             {a.name: a.params, b.name: b.params})
+            for a, b in itertools.combinations(pool, 2)]
+    if not jobs:
         return None
-    seconds = [c.name for c in others if c.shrink > 0.0][:PAIR_TRIES]
-    fixed = {best.name: best.params}
-    fitted = _map(_fit_and_score, [(n, values, fit_recs, hold_recs, fixed) for n in seconds], workers)
-    pairs = [Candidate(f"{best.name}+{n}", fx, cost, after, shrink(before, after))
-             for n, fx, cost, after in fitted]
-    if not pairs:
-        return None
-    top = max(pairs, key=lambda c: c.shrink)
-    return top if shrink(best.holdout, top.holdout) >= MIN_SHRINK_SECOND else None
+    fitted = _map(_fit_pair, jobs, workers)
+    best = None
+    for (pair_names, fx, cost, after), job in zip(fitted, jobs):
+        joint = job[1] if job[1] is not values else None
+        cand = Candidate("+".join(pair_names), fx, cost, after, shrink(before, after), values=joint)
+        pays = all(shrink(by_name[other].holdout, after) >= MIN_SHRINK_SECOND
+                   for other in pair_names)
+        if cand.shrink >= MIN_SHRINK and pays and (best is None or cand.shrink > best.shrink):
+            best = cand
+    return best
+
+
+def _fit_pair(args):
+    names, values, fit_recs, hold_recs, start = args
+    fx, cost = fit_effects(names, values, fit_recs, start=start,
+                           forms={n: [(q.name, q.lower, q.upper, q.log) for q in EFFECTS[n].parameters
+                                      if q.name in start[n]] for n in names})
+    return names, fx, cost, mean_errors(values, fx, hold_recs)

@@ -9,7 +9,8 @@ and its NRMSE and shrink are compared with the reference's.
 
 Each effect's FMU option comes from the catalogue (``model/catalogue.py``).  Sensor lag
 is the hardware bridge's option, on the measurement path: on the model's side it is the
-same first-order lag (``model.lagged``) applied to the co-simulation's outputs.
+same dead time and first-order lag (``model.measure``) applied to the co-simulation's
+outputs.
 """
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ import numpy as np
 
 from .. import physics as ph
 from ..compare import initial_state, nrmse, shrink
-from ..model import EFFECTS, fmu_variable, lagged
+from ..model import EFFECTS, fmu_variable, measure
 from ..simulate import run_experiment
 
 #: the FMUs and the reference agree when their shrinks differ by less than this
@@ -51,14 +52,15 @@ def run_fmus(ssp, values: dict, effects: dict, rec) -> dict:
     out = run_experiment(ssp, str(rec.path), parameters=[fmu_parameters(values, effects, rec)])
     t = rec.data["t"].to_numpy(float)
     sim = {c: np.interp(t, out["t"].to_numpy(), out[c].to_numpy()) for c in ("x", "p_a", "p_b")}
-    tau = effects.get("sensor_lag", {}).get("tau", 0.0)
-    return {c: lagged(y, t, tau) for c, y in sim.items()} if tau > 0 else sim
+    lag = effects.get("sensor_lag", {})
+    return {c: measure(y, t, lag.get("tau", 0.0), lag.get("delay", 0.0)) for c, y in sim.items()}
 
 
-def confirm(values: dict, effects: dict, rec, ssp=None) -> dict:
+def confirm(values: dict, effects: dict, rec, ssp=None, effect_values: dict | None = None) -> dict:
     """The holdout ``rec`` through the FMUs, baseline and (where ``effects``) with the
     verdict's options: NRMSE per channel and shrink (set beside the reference's by
-    :func:`agreement`)."""
+    :func:`agreement`).  ``effect_values``: the load with the verdict's effects, where
+    it was identified anew with them (a friction effect); default ``values``."""
     ssp = Path(ssp) if ssp is not None else default_ssp()
     if not ssp.is_file():
         return {"ssp": str(ssp), "skipped": "the SSP is not built (python build_fmus.py)"}
@@ -66,7 +68,7 @@ def confirm(values: dict, effects: dict, rec, ssp=None) -> dict:
     doc = {"ssp": str(ssp), "recording": str(rec.path),
            "nrmse_holdout_baseline": {k: round(v, 6) for k, v in before.items()}}
     if effects:
-        after = nrmse(run_fmus(ssp, values, effects, rec), rec)
+        after = nrmse(run_fmus(ssp, effect_values or values, effects, rec), rec)
         doc.update({"effects": effects, "nrmse_holdout_after": {k: round(v, 6) for k, v in after.items()},
                     "shrink": round(shrink(before, after), 4)})
     return doc

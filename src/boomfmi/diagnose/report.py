@@ -67,16 +67,18 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
         say(f"warning (baseline): {w}")
     values = result.values()
     say(f"fitting and scoring {len(CANDIDATES)} candidate effects (this is the long part)")
-    att = attribute(values, fit_recs, hold_recs, workers=workers)
+    att = attribute(values, fit_recs, hold_recs, workers=workers,
+                    intervals={k: e.ci95 for k, e in result.params.items()})
     say(f"verdict {att.verdict}; localising the gap, confirming through the FMUs, drawing the report")
     hold = hold_recs[0]
-    verdict_fx = {}
+    verdict_fx, verdict_values = {}, values
     if att.verdict and att.verdict != ["unexplained"]:
         best = att.candidates[0]
         verdict_fx = best.params if "+" in best.name else {best.name: best.params}
+        verdict_values = best.values or values      # a friction effect's own load
     # the FMUs confirm the result in another process while the report is drawn here
     pool = ProcessPoolExecutor(1)
-    confirming = pool.submit(confirm, values, verdict_fx, hold, ssp)
+    confirming = pool.submit(confirm, values, verdict_fx, hold, ssp, verdict_values)
     rig = rig_model(hold)            # the holdout's rig, from its sidecar, for all that follows
     prep = prepare(hold, geometry=rig.geometry, P_atm=rig.P_atm)
     base_sim = simulate_recording(values, hold, rig=rig)
@@ -85,6 +87,7 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
     abs_sim["p_b"] += rig.P_atm
     loc = localise(prep, abs_sim, model_for(values, {}, rig)) if att.gap else None
     effects = [{"name": c.name, "params": c.params,
+                **({"baseline_params": {k: round(v, 6) for k, v in c.values.items()}} if c.values else {}),
                 "nrmse_holdout_after": {k: round(v, 6) for k, v in c.holdout.items()},
                 "shrink": round(c.shrink, 4), "score": c.score} for c in att.candidates]
     doc = {"judgeable": True,
@@ -92,11 +95,13 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
                         "nrmse_holdout": {k: round(v, 6) for k, v in att.baseline_holdout.items()},
                         "warnings": result.warnings},
            "noise_floor": {k: round(v, 6) for k, v in att.noise.items()},
+           "baseline_spread": {k: round(v, 6) for k, v in att.spread.items()},
+           "gap_threshold": round(att.threshold, 6),
            "gap_beyond_noise": att.gap,
            "where": loc.where if loc else [],
            "effects": effects,
            "verdict": att.verdict}
-    after_sim = simulate_recording(values, hold, effects=verdict_fx, rig=rig) if verdict_fx else None
+    after_sim = simulate_recording(verdict_values, hold, effects=verdict_fx, rig=rig) if verdict_fx else None
     try:
         doc["confirmation"] = confirming.result()
     except Exception as e:            # a failing confirmation is reported, not fatal

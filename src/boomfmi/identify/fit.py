@@ -49,6 +49,7 @@ from scipy.optimize import least_squares
 from scipy.special import ndtr
 
 from .. import physics as ph
+from ..physics import effects as fx
 from ..physics import reference_rig
 from .preprocess import Prepared, lowpass
 
@@ -121,6 +122,7 @@ class Modes:
     direction: np.ndarray
     impacts: np.ndarray
     v_min: float
+    v: np.ndarray = None       #: the smoothed velocity the classification used [m/s]
 
 
 def motion_modes(p: Prepared, L: float) -> Modes:
@@ -136,7 +138,7 @@ def motion_modes(p: Prepared, L: float) -> Modes:
     margin = max(3.0 * resolution(p.x_raw), 2e-4)
     at_stop = (xs < margin) | (xs > L - margin)
     impacts = np.flatnonzero(at_stop[1:] & ~at_stop[:-1] & sliding[:-1]) + 1
-    return Modes(sliding, direction, impacts, v_min)
+    return Modes(sliding, direction, impacts, v_min, vs)
 
 
 #: Cut-off [Hz] of the state-variable filter of the equation error.
@@ -152,7 +154,8 @@ def correlation_samples(p: Prepared, cutoff: float | None = None) -> float:
     return max(1.0, p.fs / (2.0 * (cutoff or p.cutoff)))
 
 
-def equation_rows(p: Prepared, cyl: ph.Cylinder, P_atm: float, L: float, cutoff: float = EE_CUTOFF):
+def equation_rows(p: Prepared, cyl: ph.Cylinder, P_atm: float, L: float, cutoff: float = EE_CUTOFF,
+                  v_s: float = 0.0):
     """Eq. 8 over the whole recording, through a state-variable filter G (zero-phase
     low-pass at ``cutoff``), as rows ``X theta = y`` in theta = (M, K_v, F_d, F_L)::
 
@@ -163,7 +166,9 @@ def equation_rows(p: Prepared, cyl: ph.Cylinder, P_atm: float, L: float, cutoff:
     F_c = F_p - F_L sin(phi) and a = v = 0, which is the row with s = 0.  Since every
     term is filtered alike, the equation holds at every sample, through every start,
     stop and reversal, and the filter can be slow (its noise is low) without biasing
-    anything.  G[a] and G[v] are derivatives of G[x].  Samples within the filter's
+    anything.  G[a] and G[v] are derivatives of G[x].  With a Stribeck velocity ``v_s``
+    [m/s] > 0 (stribeck_friction) the sliding friction is ``F_d (1 - w) + F_s w``,
+    w = exp(-|v| / v_s) at the measured speed, and theta gains F_s (a fifth column).  Samples within the filter's
     reach of the recording's ends or of an impact on a stop are left out (a stop's
     impulse is not in Eq. 8).  Returns ``(X, y, mask)``."""
     modes = motion_modes(p, L)
@@ -173,7 +178,12 @@ def equation_rows(p: Prepared, cyl: ph.Cylinder, P_atm: float, L: float, cutoff:
     vg = np.gradient(xg, p.t)
     ag = np.gradient(vg, p.t)
     F_p = ph.piston_force(p.p_a_raw, p.p_b_raw, cyl, P_atm)
-    X = np.column_stack([ag, vg, G(modes.direction * np.cos(p.phi)), G(s * np.sin(p.phi))])
+    friction = modes.direction * np.cos(p.phi)
+    if v_s > 0.0:
+        w = fx.stribeck_weight(modes.v, v_s)
+        X = np.column_stack([ag, vg, G(friction * (1.0 - w)), G(s * np.sin(p.phi)), G(friction * w)])
+    else:
+        X = np.column_stack([ag, vg, G(friction), G(s * np.sin(p.phi))])
     y = G(s * F_p)
     reach = int(REACH * p.fs / cutoff)
     use = np.ones(len(y), bool)
@@ -184,12 +194,14 @@ def equation_rows(p: Prepared, cyl: ph.Cylinder, P_atm: float, L: float, cutoff:
 
 
 def equation_error(preps: list[Prepared], cyl: ph.Cylinder, P_atm: float, L: float,
-                   n_boot: int = 200, block: float = 0.1, seed: int = 0, cutoff: float = EE_CUTOFF):
-    """Stage 1: M, K_v, F_d, F_L by least squares on :func:`equation_rows` of every
-    recording; 95 % intervals from a moving-block bootstrap of the rows."""
+                   n_boot: int = 200, block: float = 0.1, seed: int = 0, cutoff: float = EE_CUTOFF,
+                   v_s: float = 0.0):
+    """Stage 1: M, K_v, F_d, F_L (and F_s, with a Stribeck velocity ``v_s``) by least
+    squares on :func:`equation_rows` of every recording; 95 % intervals from a
+    moving-block bootstrap of the rows."""
     X, y = [], []
     for p in preps:
-        Xi, yi, use = equation_rows(p, cyl, P_atm, L, cutoff)
+        Xi, yi, use = equation_rows(p, cyl, P_atm, L, cutoff, v_s)
         X.append(Xi[use])
         y.append(yi[use])
     X, y = np.vstack(X), np.concatenate(y)
@@ -214,7 +226,7 @@ def equation_error(preps: list[Prepared], cyl: ph.Cylinder, P_atm: float, L: flo
         boots.append(th / scale)
     boots = np.array(boots)
     lo, hi = np.percentile(boots, [2.5, 97.5], axis=0)
-    names = ("M", "K_v", "F_d", "F_L")
+    names = ("M", "K_v", "F_d", "F_L", "F_s")[:X.shape[1]]
     est = {k: _widened(k, theta[j], min(lo[j], theta[j]), max(hi[j], theta[j])) for j, k in enumerate(names)}
     residual = y - X @ theta
     return est, {"samples": int(n), "condition_number": cond,
@@ -253,32 +265,44 @@ def _sliding_runs(p: Prepared, cyl: ph.Cylinder, P_atm: float, L: float) -> _Run
                  lowpass(np.gradient(p.x_raw, p.t), p.fs, VE_CUTOFF), np.gradient(xs, p.t), reach)
 
 
-def _net_force(r: _Runs, i0: int, i1: int, d: float, F_d: float, F_L: float) -> np.ndarray:
+def _net_force(r: _Runs, i0: int, i1: int, d: float, F_d: float, F_L: float,
+               F_s: float = 0.0, v_s: float = 0.0) -> np.ndarray:
     """The force that drives a run, each sample's value the mean of it and the next
-    (the force held over a sample interval, centred: a held sample would lag it)."""
+    (the force held over a sample interval, centred: a held sample would lag it).
+    With ``v_s`` > 0 the Coulomb level follows the Stribeck curve at the measured
+    speed (the series-parallel form: the recursion stays linear)."""
     phi = r.p.phi[i0:i1 + 1]
-    F = r.F_p[i0:i1 + 1] - F_L * np.sin(phi) - d * F_d * np.cos(phi)
+    level = F_d
+    if v_s > 0.0:
+        w = fx.stribeck_weight(r.modes.v[i0:i1 + 1], v_s)
+        level = F_d * (1.0 - w) + F_s * w
+    F = r.F_p[i0:i1 + 1] - F_L * np.sin(phi) - d * level * np.cos(phi)
     if len(F) > i1 - i0:
         return 0.5 * (F[:-1] + F[1:])
     return np.concatenate((0.5 * (F[:-1] + F[1:]), F[-1:]))
 
 
-def _run_velocity(r: _Runs, theta) -> np.ndarray:
-    """Stage 2's simulated velocity over every run of one recording (0 elsewhere)."""
-    M, K_v, F_d, F_L = theta
+def _run_velocity(r: _Runs, theta, v_s: float = 0.0) -> np.ndarray:
+    """Stage 2's simulated velocity over every run of one recording (0 elsewhere);
+    theta = (M, K_v, F_d, F_L[, F_s])."""
+    M, K_v, F_d, F_L = theta[:4]
+    F_s = theta[4] if len(theta) > 4 else 0.0
     v = np.zeros(len(r.p.t))
     for i0, i1, d in r.spans:
-        v[i0:i1] = ph.sliding_velocity(r.v_start[i0], _net_force(r, i0, i1, d, F_d, F_L), K_v, M, r.p.dt)
+        v[i0:i1] = ph.sliding_velocity(r.v_start[i0], _net_force(r, i0, i1, d, F_d, F_L, F_s, v_s),
+                                       K_v, M, r.p.dt)
     return v
 
 
 def velocity_error(preps: list[Prepared], start: dict, cyl: ph.Cylinder, P_atm: float, L: float,
-                   n_boot: int = 300, seed: int = 0):
-    """Stage 2: M, K_v, F_d, F_L by velocity output error over every sliding run, from
-    ``start`` (stage 1); intervals from a bootstrap over the runs of the linearised
-    fit.  Returns ``(estimates, details)`` or ``(None, details)`` without usable runs."""
+                   n_boot: int = 300, seed: int = 0, v_s: float = 0.0):
+    """Stage 2: M, K_v, F_d, F_L (and F_s, with a Stribeck velocity ``v_s``) by velocity
+    output error over every sliding run, from ``start`` (stage 1); intervals from a
+    bootstrap over the runs of the linearised fit.  Returns ``(estimates, details)``
+    or ``(None, details)`` without usable runs."""
     all_runs = [_sliding_runs(p, cyl, P_atm, L) for p in preps]
     names = ("M", "K_v", "F_d", "F_L")
+    held = (start["F_s"],) if v_s > 0.0 else ()     # the Stribeck curve's static end, from the starts
     theta0 = np.array([start[k] for k in names])
     # a start outside physics (the equation error on very little motion) is replaced:
     # K_v from its magnitude, M for a 10 ms mechanical time constant, F_d 50 N
@@ -302,10 +326,10 @@ def velocity_error(preps: list[Prepared], start: dict, cyl: ph.Cylinder, P_atm: 
 
     def residuals(z):
         theta = theta0 * np.exp(z)
-        return np.concatenate([(lowpass(_run_velocity(r, theta), r.p.fs, VE_CUTOFF) - r.v_meas)[m]
+        return np.concatenate([(lowpass(_run_velocity(r, (*theta, *held), v_s), r.p.fs, VE_CUTOFF) - r.v_meas)[m]
                                for r, m in zip(all_runs, masks)])
 
-    res = least_squares(residuals, np.zeros(4), diff_step=1e-4, x_scale=1.0, max_nfev=50)
+    res = least_squares(residuals, np.zeros(len(names)), diff_step=1e-4, x_scale=1.0, max_nfev=50)
     theta = theta0 * np.exp(res.x)
     # bootstrap over the runs of the linearised problem around the optimum
     J, f = res.jac, res.fun
@@ -364,9 +388,11 @@ def _starts(r: _Runs, L: float):
 
 
 def static_friction(preps: list[Prepared], base: dict, cyl: ph.Cylinder, P_atm: float, L: float,
-                    n_grid: int = 400):
-    """Stage 3: F_s from every start (see the module's docstring).  Returns
-    ``(Estimate or None, identified, details)``."""
+                    n_grid: int = 400, v_s: float = 0.0):
+    """Stage 3: F_s from every start (see the module's docstring).  With a Stribeck
+    velocity ``v_s`` > 0 the friction after a start falls from F_s towards F_d along
+    the Stribeck curve (at the measured speed), so each candidate F_s is simulated on
+    its own.  Returns ``(Estimate or None, identified, details)``."""
     M, K_v, F_d, F_L = (base[k] for k in ("M", "K_v", "F_d", "F_L"))
     events, lower = [], 0.0
     for p in preps:
@@ -390,31 +416,23 @@ def static_friction(preps: list[Prepared], base: dict, cyl: ph.Cylinder, P_atm: 
             lower = max(lower, float(np.max(np.abs(smooth[held]))))
         for j, i0, ie, d, i1 in _starts(r, L):
             need = d * level[j:ie]
-            before = need[:i0 - j]
-            if len(before) < INFORMATIVE_SAMPLES:
+            if i0 - j < INFORMATIVE_SAMPLES:
                 continue
-            # for each candidate start sample k: the run simulated from rest at k, as
-            # the position sensor would read it (its quantum q: a reading moves only
-            # once the piston has crossed the next level, and where within its
-            # quantum the piston rested is unknown: the best offset is taken)
-            n = ie - j
-            F_net = _net_force(r, j, ie, d, F_d, F_L)
-            moved = np.zeros((n, n))
-            for k in range(n - 1):
-                v = ph.sliding_velocity(0.0, F_net[k:], K_v, M, p.dt)
-                moved[k, k + 1:] = np.cumsum(0.5 * (v[:-1] + v[1:])) * p.dt
             rest = p.x_raw[j:max(j + 1, i0 - int(0.01 * p.fs))]
-            reading = float(np.median(rest))
             q = _quantum(p.x_raw[j:min(len(p.x_raw), ie + int(0.05 * p.fs))])
-            ll = _start_likelihood(moved, p.x_raw[j:ie], reading, q, float(np.std(rest)))
-            events.append((need, ll / TEMPER, ie - j, float(p.t[i0])))
+            events.append(dict(need=need, n=ie - j, r=r, j=j, ie=ie, d=d, t=float(p.t[i0]),
+                               reading=float(np.median(rest)), q=q, spread=float(np.std(rest))))
     if not events:
         return None, False, {"starts": 0, "lower_bound_N": lower}
-    hi_level = max(float(np.max(e[0])) for e in events)
+    hi_level = max(float(np.max(e["need"])) for e in events)
+    if v_s > 0.0:
+        n_grid = min(n_grid, 120)
     grid = np.linspace(F_d, max(min(hi_level, GRID_TOP * F_d), 1.5 * F_d), n_grid)
     total = np.zeros(n_grid)
     each = []
-    for need, ll_k, n, t_start in events:
+    for e in events:
+        need, n, r, j, ie, d = e["need"], e["n"], e["r"], e["j"], e["ie"], e["d"]
+        dt = r.p.dt
         reached = np.maximum.accumulate(need)
         # first sample at which the drive force exceeds each F_s; beyond the window:
         # the window's last start (the run is seen to move, so it started by then)
@@ -424,9 +442,30 @@ def static_friction(preps: list[Prepared], base: dict, cyl: ph.Cylinder, P_atm: 
         step = reached[np.clip(k, 0, n - 1)] - prev
         frac = np.where((k > 0) & (k < n) & (step > 0), (grid - prev) / np.where(step > 0, step, 1.0), 1.0)
         k = np.clip(k, 0, n - 1)
-        ll = (1.0 - frac) * ll_k[np.clip(k - 1, 0, n - 1)] + frac * ll_k[k]
+        readings = r.p.x_raw[j:ie]
+        like = lambda moved: _start_likelihood(moved, readings, e["reading"], e["q"], e["spread"]) / TEMPER
+
+        def moved_from(starts, F_net):
+            # the run simulated from rest at each start sample, as positions
+            out = np.zeros((len(starts), n))
+            for row, (s0, F) in enumerate(zip(starts, F_net)):
+                if s0 < n - 1:
+                    v = ph.sliding_velocity(0.0, F[s0:], K_v, M, dt)
+                    out[row, s0 + 1:] = np.cumsum(0.5 * (v[:-1] + v[1:])) * dt
+            return out
+        if v_s <= 0.0:
+            F_net = _net_force(r, j, ie, d, F_d, F_L)
+            ll_k = like(moved_from(range(n), [F_net] * n))
+            ll = (1.0 - frac) * ll_k[np.clip(k - 1, 0, n - 1)] + frac * ll_k[k]
+        else:
+            # each candidate F_s its own friction history: from it at rest, falling
+            # towards F_d along the Stribeck curve as the measured speed grows
+            nets = [_net_force(r, j, ie, d, F_d, F_L, g, v_s) for g in grid]
+            ll_late = like(moved_from(k, nets))
+            ll_early = like(moved_from(np.clip(k - 1, 0, n - 1), nets))
+            ll = (1.0 - frac) * ll_early + frac * ll_late
         total += ll
-        each.append({"t_s": round(t_start, 4), "F_s_N": float(grid[int(np.argmax(ll))])})
+        each.append({"t_s": round(e["t"], 4), "F_s_N": float(grid[int(np.argmax(ll))])})
     # the posterior over the grid (uniform prior above the largest force held at rest)
     total[grid < lower] = -np.inf
     if not np.isfinite(total).any():
@@ -543,21 +582,30 @@ def fit_A_max(preps: list[Prepared], cyl: ph.Cylinder, valve: ph.Valve, gas: ph.
 
 def identify(preps: list[Prepared], cyl: ph.Cylinder = ph.Cylinder(), geom: ph.Geometry = ph.Geometry(),
              P_atm: float = reference_rig.P_atm, refine_all: bool = True, with_A_max: bool = False,
-             valve: ph.Valve = ph.Valve(), gas: ph.Gas = ph.Gas()) -> FitResult:
+             valve: ph.Valve = ph.Valve(), gas: ph.Gas = ph.Gas(), v_s: float = 0.0) -> FitResult:
     """The sound method on prepared recordings; see the module's docstring.
-    ``refine_all=False`` stops after stage 1 (and F_s)."""
+    ``refine_all=False`` stops after stage 1 (and F_s).  ``v_s`` > 0 [m/s]: the load
+    with stribeck_friction at that Stribeck velocity (every stage with the Stribeck
+    curve; F_s from the starts before and after stage 2)."""
     L = cyl.L
-    est, info = equation_error(preps, cyl, P_atm, L)
+    est, info = equation_error(preps, cyl, P_atm, L, v_s=v_s)
     details = {"equation_error": info}
     warnings = []
+    values = lambda: {k: e.value for k, e in est.items()}
+    if v_s > 0.0:        # F_s from the starts first: the sliding alone hardly holds it
+        F_s, identified, info3 = static_friction(preps, values(), cyl, P_atm, L, v_s=v_s)
+        if F_s is not None:
+            est["F_s"] = F_s
+        else:
+            est["F_s"] = Estimate(max(est["F_d"].value, est.get("F_s", est["F_d"]).value), (math.nan, math.nan), "N")
     if refine_all:
-        refined, info2 = velocity_error(preps, {k: e.value for k, e in est.items()}, cyl, P_atm, L)
+        refined, info2 = velocity_error(preps, values(), cyl, P_atm, L, v_s=v_s)
         details["velocity_error"] = info2
         if refined is None:
             warnings.append("too few runs of motion for the velocity fit: the load is from the equation error alone")
         else:
             est.update(refined)
-    F_s, identified, info3 = static_friction(preps, {k: e.value for k, e in est.items()}, cyl, P_atm, L)
+    F_s, identified, info3 = static_friction(preps, values(), cyl, P_atm, L, v_s=v_s)
     details["static_friction"] = dict(info3, identified=bool(identified))
     if F_s is None:
         warnings.append("no start of motion from rest: F_s cannot be identified; F_d is used in its place")

@@ -5,8 +5,8 @@ its own: it needs scipy and pandas, which the FMUs do not carry), the virtual ri
 diagnosis all step this model.  Only relative imports are used inside this package, so
 that ``build_fmus.py`` can bundle it into each FMU beside the physics.
 """
-from .boom import Boom, Model, check_effects, lagged
+from .boom import Boom, Model, check_effects, lagged, measure
 from .catalogue import EFFECTS, PENDING, STAGES, Effect, Parameter, effects_from_options, fmu_variable, of_fmu
 
-__all__ = ["Boom", "Model", "check_effects", "lagged", "EFFECTS", "PENDING", "STAGES", "Effect",
+__all__ = ["Boom", "Model", "check_effects", "lagged", "measure", "EFFECTS", "PENDING", "STAGES", "Effect",
            "Parameter", "effects_from_options", "fmu_variable", "of_fmu"]

@@ -29,6 +29,7 @@ import numpy as np
 
 from .. import physics as ph
 from ..physics import effects as fx
+from ..physics.lag import delayed
 from ..physics import reference_rig
 from .catalogue import EFFECTS
 
@@ -96,6 +97,7 @@ class Boom:
         self.tau_spool = _param(on, "valve_dynamics", "tau")
         self.h_wall = _param(on, "heat_transfer", "h")
         self.tau_sensor = _param(on, "sensor_lag", "tau")
+        self.delay_sensor = _param(on, "sensor_lag", "delay")
         self.bore = math.sqrt(4.0 * self.cylinder.A_a / math.pi)   #: for the wall's area [m]
 
     # ------------------------------------------------------------------ valve
@@ -210,8 +212,13 @@ class Boom:
     # ----------------------------------------------------------- measurement
     def measured(self, y: np.ndarray, t: np.ndarray) -> np.ndarray:
         """What the sensors report of the signal ``y`` on times ``t`` [s] (sensor_lag: a
-        first-order lag along it; without it, ``y``)."""
-        return lagged(y, t, self.tau_sensor) if self.tau_sensor > 0.0 else y
+        dead time, then a first-order lag; without it, ``y``)."""
+        return measure(y, t, self.tau_sensor, self.delay_sensor)
+
+    @property
+    def measures(self) -> bool:
+        """Whether the measurement path changes what is recorded (sensor_lag on)."""
+        return self.tau_sensor > 0.0 or self.delay_sensor > 0.0
 
 
 def lagged(y: np.ndarray, t: np.ndarray, tau: float) -> np.ndarray:
@@ -221,3 +228,11 @@ def lagged(y: np.ndarray, t: np.ndarray, tau: float) -> np.ndarray:
     for k in range(1, len(y)):
         out[k] = fx.sensor_lag_step(out[k - 1], y[k], t[k] - t[k - 1], tau)
     return out
+
+
+def measure(y: np.ndarray, t: np.ndarray, tau: float = 0.0, delay: float = 0.0) -> np.ndarray:
+    """The sensor_lag effect along a signal: ``delay`` [s] of dead time
+    (``physics.lag.delayed``), then the first-order lag ``tau`` [s] (:func:`lagged`)."""
+    if delay > 0.0:
+        y = delayed(y, t, delay)
+    return lagged(y, t, tau) if tau > 0.0 else y

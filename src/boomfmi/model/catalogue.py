@@ -109,6 +109,13 @@ def _p(name, unit, lower, upper, log, option, description, **kw):
     return Parameter(name, unit, lower, upper, log, option, description, **kw)
 
 
+_TAU_SENSOR = _p("tau", "s", 2e-4, 0.03, True, "tau_sensor",
+                 "sensor_lag: time constant of a first-order lag on every measured channel; 0: off")
+_C_LEAK = _p("C", "kg/(s.Pa)", 1e-13, 5e-10, True, "C_leak",
+             "piston_leakage: laminar conductance of the piston seal, A to B; 0: off")
+_A_LEAK = _p("A", "m2", 1e-10, 2e-7, True, "A_leak",
+             "piston_leakage: area of a turbulent leak gap across the piston seal (orifice law); 0: off")
+
 #: name -> :class:`Effect`, in the order of ``effects.md``
 EFFECTS = {e.name: e for e in (
     Effect("valve_dynamics", "valve", "spool",
@@ -126,12 +133,9 @@ EFFECTS = {e.name: e for e in (
            "the pressure relaxes towards the isothermal m R T_w / V with time constant "
            "m c_v / (h A_wall), A_wall the wall the air touches (end faces and barrel)"),
     Effect("piston_leakage", "cylinder", "seal",
-           ((_p("C", "kg/(s.Pa)", 1e-13, 5e-10, True, "C_leak",
-                "piston_leakage: laminar conductance of the piston seal, A to B; 0: off"),),
-            (_p("A", "m2", 1e-10, 2e-7, True, "A_leak",
-                "piston_leakage: area of a turbulent leak gap across the piston seal (orifice law); 0: off"),)),
-           "a leak A -> B across the seal: laminar C (p_a - p_b), or turbulent through a gap "
-           "of area A (the orifice law, Eq. 1), whichever fits", _leak),
+           ((_C_LEAK,), (_A_LEAK,), (_C_LEAK, _A_LEAK)),
+           "a leak A -> B across the seal: laminar C (p_a - p_b), turbulent through a gap "
+           "of area A (the orifice law, Eq. 1), or both at once (a worn seal), whichever fits", _leak),
     Effect("stribeck_friction", "boom_load", "friction",
            ((_p("v_s", "m/s", 2e-4, 0.1, True, "v_s",
                 "stribeck_friction: Stribeck velocity of exp(-|v|/v_s); 0: off (the paper's step)"),),),
@@ -145,9 +149,10 @@ EFFECTS = {e.name: e for e in (
            "(area A_n, to the exhaust) in series with the valve; inflow passes freely",
            _cushion),
     Effect("sensor_lag", "hardware_bridge", "measurement",
-           ((_p("tau", "s", 2e-4, 0.03, True, "tau_sensor",
-                "sensor_lag: time constant of a first-order lag on every measured channel; 0: off"),),),
-           "first-order lag of every measured channel"),
+           ((_TAU_SENSOR,),
+            (_TAU_SENSOR, _p("delay", "s", 2e-4, 0.02, True, "delay_sensor",
+                             "sensor_lag: dead time of every measured channel (before its lag); 0: none"))),
+           "a first-order lag of every measured channel, or a dead time then the lag, whichever fits"),
 )}
 
 #: the effects.md names that have no entry yet, with why (checked by the tests)

@@ -179,7 +179,7 @@ class Resampler:
                            "p_a": out[:, 0], "p_b": out[:, 1], "x": np.clip(out[:, 2], 0.0, boom.cylinder.L),
                            "v": out[:, 3]})
         df["alpha"] = ph.alpha_from_x(df["x"].to_numpy(), boom.geometry)
-        if boom.tau_sensor > 0:
+        if boom.measures:
             for col in ("p_a", "p_b", "alpha", "x"):
                 df[col] = boom.measured(df[col].to_numpy(), times)
         return df
@@ -187,11 +187,15 @@ class Resampler:
 
 def simulate_reference(model: Model, command: Callable[[float], dict], stop_time: float,
                        times: np.ndarray | None = None, breakpoints=(), rtol: float = 1e-9,
-                       method: str = "LSODA") -> pd.DataFrame:
+                       method: str = "LSODA", u_between=None, max_step: float = np.inf) -> pd.DataFrame:
     """Solve the boom from rest at ``p_a0, p_b0, x0`` under ``command(t) -> {"u", "f_ext"}``.
 
     ``command`` must be piecewise constant between ``breakpoints`` [s] (the integrator
-    restarts at each).  Returns a DataFrame on ``times`` (default: every ms) with
+    restarts at each), unless ``u_between(t)`` is given: then the command is that
+    continuous function of time between breakpoints (a sampled command that moves a
+    little each sample, as a sine sweep does, without a restart per sample); then give
+    ``max_step`` [s] too, or the solver may stride over the command's moves while the
+    state rests.  Returns a DataFrame on ``times`` (default: every ms) with
     columns ``time, u, f_ext, p_a, p_b, x, v, alpha`` (absolute pressures).
     """
     boom = Boom(model)
@@ -213,8 +217,12 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
         while t < cut - 1e-15:
             s = mode
             events = machine.events(s, y, f_ext)
-            sol = solve_ivp(lambda _, y, s=s: rhs(boom, layout, u, f_ext, s, y), (t, cut), y,
-                            method=method, rtol=rtol, atol=layout.atol, events=events or None,
+            if u_between is None:
+                fun = lambda _, y, s=s: rhs(boom, layout, u, f_ext, s, y)
+            else:
+                fun = lambda tau, y, s=s: rhs(boom, layout, u_between(tau), f_ext, s, y)
+            sol = solve_ivp(fun, (t, cut), y,
+                            method=method, rtol=rtol, atol=layout.atol, events=events or None, max_step=max_step,
                             dense_output=True)
             if sol.status < 0:
                 raise RuntimeError(f"reference solver failed at t = {t:g} s: {sol.message}")

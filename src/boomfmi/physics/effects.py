@@ -94,12 +94,22 @@ def leakage_orifice_slopes(p_a: float, p_b: float, A: float, gas: Gas = Gas()) -
     return float(signed_mass_flow_slope(A, p_b, p_a, gas)), float(signed_mass_flow_slope(A, p_a, p_b, gas))
 
 
+def stribeck_weight(v, v_s: float):
+    """The static level's share w of the Stribeck friction at speed ``v`` [m/s] (float
+    or array): the Coulomb level is ``F_d (1 - w) + F_s w``, ``w = exp(-|v| / v_s)``."""
+    if type(v) in (float, int):
+        return math.exp(-abs(v) / v_s)
+    import numpy as np
+    return np.exp(-np.abs(v) / v_s)
+
+
 def stribeck_load(load: Load, v: float, v_s: float) -> Load:
     """The load with its Coulomb level at speed ``v`` [m/s] on the Stribeck curve
-    ``F_d + (F_s - F_d) exp(-|v| / v_s)``; ``v_s <= 0`` leaves the paper's step."""
+    ``F_d + (F_s - F_d) exp(-|v| / v_s)`` (:func:`stribeck_weight`); ``v_s <= 0``
+    leaves the paper's step."""
     if v_s <= 0.0:
         return load
-    return load._replace(F_d=load.F_d + (load.F_s - load.F_d) * math.exp(-abs(v) / v_s))
+    return load._replace(F_d=load.F_d + (load.F_s - load.F_d) * stribeck_weight(v, v_s))
 
 
 def _cushion(mdot: float, p: float, distance: float, length: float, A_n: float, P_e: float,
