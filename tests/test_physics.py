@@ -111,3 +111,40 @@ def test_geometry_check_names_the_parameter():
     with pytest.raises(ph.ParameterError, match="parameter h"):
         ph.check_geometry(ph.Geometry(h=0.2), reference_rig.L)
     ph.check_geometry(ph.Geometry(), reference_rig.L)
+
+
+def test_sliding_velocity_is_eq_8s_closed_form_under_a_held_force():
+    """Under a constant net force F from rest, Eq. 8 gives v(t) = F / K_v (1 - exp(-K_v t / M));
+    the recursion is exact at every sample, row by row for a 2-D force."""
+    K_v, M, dt, F = 2829.0, 22.7, 1e-3, 150.0
+    t = np.arange(200) * dt
+    v = ph.sliding_velocity(0.0, np.full(200, F), K_v, M, dt)
+    np.testing.assert_allclose(v, F / K_v * (1.0 - np.exp(-K_v * t / M)), rtol=1e-12, atol=1e-15)
+    rows = ph.sliding_velocity(np.array([0.0, 0.05]), np.vstack([np.full(50, F), np.zeros(50)]), K_v, M, dt)
+    np.testing.assert_allclose(rows[1], 0.05 * np.exp(-K_v * t[:50] / M), rtol=1e-12)
+    np.testing.assert_allclose(rows[0], v[:50], rtol=1e-12)
+
+
+def test_a_delay_line_reads_the_signal_late_and_agrees_with_delayed():
+    from boomfmi.physics.lag import DelayLine, delayed
+    t = np.arange(0.0, 0.1, 1e-3)
+    y = np.sin(40.0 * t)
+    line = DelayLine(0.0035)
+    out = []
+    for ti, yi in zip(t, y):
+        line.push(ti, (yi, 2.0 * yi))
+        out.append(line.read(ti))
+    out = np.array(out)
+    np.testing.assert_allclose(out[:, 0], delayed(y, t, 0.0035), atol=1e-12)
+    np.testing.assert_allclose(out[:, 1], 2.0 * out[:, 0], atol=1e-12)
+    assert out[0, 0] == y[0] and abs(out[50, 0] - np.sin(40.0 * (t[50] - 0.0035))) < 2e-3
+    assert len(line.times) < 10          # it keeps only what a read still needs
+
+
+def test_numpy_scalars_take_the_float_path():
+    """Indexing an array gives numpy.float64: the elementary functions must treat it as
+    a float (the math path), not as an array (a NumPy call per scalar is ~20 times slower)."""
+    from boomfmi.physics import _xp
+    x = np.array([0.25])[0]
+    assert type(_xp.clip(x, 0.0, 0.2)) is float or _xp.clip(x, 0.0, 0.2) == 0.2
+    assert _xp.where(np.bool_(True), 1.0, 2.0) == 1.0 and not isinstance(_xp.where(x > 0, 1.0, 2.0), np.ndarray)

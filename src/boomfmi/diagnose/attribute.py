@@ -1,24 +1,42 @@
 """Which unmodelled effect explains the gap, and by how much the model improves.
 
-For each candidate of ``effects.md`` (the catalogue, ``model/catalogue.py``, with its
-bounds; forms in ``physics/effects.py``; where a mechanism has two laws, as a seal's
-leak, both are fitted and the better kept): its few parameters are fitted on the fit
-recordings, with the baseline load parameters re-identified first (``identify.fit``),
-by output error of the whole model (the monolithic reference with the effect on,
-through ``compare.simulate_recording``) on x, p_a and p_b, each residual normalised by
-its channel's range.  Each fitted candidate is then scored on the holdout
-recordings, which are never fitted on: ``shrink = 1 - (error after) / (error before)``,
-errors summed over the three channels.  A second effect is fitted beside the best
-where the best leaves a gap.
+Every candidate of ``effects.md`` (the catalogue, ``model/catalogue.py``, with its
+bounds; its laws in ``physics/effects.py``) is fitted on the fit recordings and scored
+on the holdout recordings, which are never fitted on:
+``shrink = 1 - (error after) / (error before)``, the errors (NRMSE) summed over x, p_a
+and p_b.
+
+* **Laws.**  Where a mechanism has more than one law (a seal that leaks laminar,
+  turbulent or both; a sensor path with a lag, or a dead time and a lag), each is
+  fitted and the one that fits the fit recordings best is kept; a law that holds
+  another's parameters and more is tried only where the smaller one explains
+  something.
+* **Fits.**  An effect's parameters are fitted by output error of the whole model (the
+  monolithic reference with the effect on, ``compare.simulate_recording``), each
+  channel's residual over its range.  Its range is screened first
+  (:func:`fit_effects`): an effect that lowers the fit error nowhere by ``SCREEN`` is
+  not fitted further.
+* **The baseline with the effect.**  The baseline load is identified once, on the
+  fit recordings (``identify.fit``: from the recorded pressures, so an effect on the
+  pneumatics or on every sensor alike does not bias it).  An effect that changes the
+  load's own law (``friction``: the Stribeck curve) is fitted jointly with the load:
+  for each value of its parameter the load is identified anew with the effect in
+  Eq. 8 and 9 (:func:`_fit_friction`), so a baseline that absorbed part of the effect
+  does not hide it.
+* **Pairs.**  Where no single effect explains the gap, or the best leaves a gap, pairs
+  among the ``PAIR_POOL`` best singles are fitted jointly (:func:`_pairs`); each effect
+  of a pair must pay for itself (remove ``MIN_SHRINK_SECOND`` of what the other alone
+  leaves), so that noise is not explained by a second effect.
 
 Decisions carry margins against the recordings' own noise:
 
 * no gap: the baseline's holdout error is within ``NOISE_FACTOR`` times the noise
-  floor (each channel's noise over its range) plus ``ABS_FLOOR``: verdict ``[]``;
-* the best candidate shrinks the error by at least ``MIN_SHRINK``: it is the verdict;
-  where the error it leaves is still beyond the noise, the next candidates are fitted
-  beside it, and the best of them joins the verdict when it removes at least
-  ``MIN_SHRINK_SECOND`` of that remaining error;
+  floor (each channel's noise over its range), plus what the baseline's own
+  uncertainty moves it (each identified parameter at the nearer end of its 95 %
+  interval: :func:`baseline_spread`), plus ``ABS_FLOOR``: verdict ``[]``, and no
+  candidate is fitted (none could show more than the noise);
+* a pair that passes (see above): the pair; else the best single effect if it
+  shrinks the error by at least ``MIN_SHRINK``;
 * otherwise ``["unexplained"]``.
 """
 from __future__ import annotations
@@ -283,6 +301,10 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     spread = baseline_spread(values, intervals or {}, hold_recs, workers)
     threshold = NOISE_FACTOR * sum(noise.values()) + sum(spread.values()) + ABS_FLOOR
     gap = sum(before.values()) > threshold
+    if not gap:        # nothing beyond the noise and the baseline's own uncertainty: no fit can show more
+        att = Attribution(before, noise, gap, [], [])
+        att.threshold, att.spread = threshold, spread
+        return att
     base_cost = sum(e * e for e in mean_errors(values, {}, fit_recs, FIT_RTOL).values())
     fitted = _map(_fit_and_score, [(n, values, fit_recs, hold_recs, None, base_cost) for n in names], workers)
     cands = [Candidate(n, fx[n], cost, after, shrink(before, after), values=joint)

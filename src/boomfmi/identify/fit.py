@@ -365,6 +365,7 @@ GRID_TOP = 4.0
 MODEL_SPREAD = 2e-6
 TEMPER = 4.0
 OUTLIER = 1e-4   #: probability of a reading no model explains (a glitch)
+STRAY = 0.05     #: probability that a start is not what the model makes of it
 #: F_s's 95 % interval is reported as identifying it when narrower than this share of
 #: its value on either side.
 IDENTIFIED_WIDTH = 0.15
@@ -464,7 +465,12 @@ def static_friction(preps: list[Prepared], base: dict, cyl: ph.Cylinder, P_atm: 
             ll_late = like(moved_from(k, nets))
             ll_early = like(moved_from(np.clip(k - 1, 0, n - 1), nets))
             ll = (1.0 - frac) * ll_early + frac * ll_late
-        total += ll
+        # each start's evidence as a distribution over the grid, mixed with a little of
+        # the uniform one: a start that no other agrees with (a rest that was no rest,
+        # a start the sensor saw late) cannot veto all the others
+        post = np.exp(ll - np.max(ll))
+        post /= post.sum()
+        total += np.log((1.0 - STRAY) * post + STRAY / n_grid)
         each.append({"t_s": round(e["t"], 4), "F_s_N": float(grid[int(np.argmax(ll))])})
     # the posterior over the grid (uniform prior above the largest force held at rest)
     total[grid < lower] = -np.inf

@@ -12,7 +12,8 @@ import math
 
 import numpy as np
 
-_SCALARS = (float, int)
+_SCALARS = (float, int, np.float64)   #: NumPy's float64 scalar (what indexing an array gives) is one too
+_BOOLS = (bool, np.bool_)
 
 
 def sqrt(x):
@@ -54,7 +55,7 @@ def clip(x, lo, hi):
 
 
 def where(cond, a, b):
-    if type(cond) is bool:
+    if type(cond) in _BOOLS:
         return a if cond else b
     return np.where(cond, a, b)
 
