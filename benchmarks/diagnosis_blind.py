@@ -212,6 +212,9 @@ def run_case(args) -> dict:
                 difference=info["difference"], margin=info["margin"],
                 best=best["name"] if best else None, shrink_best=best["shrink"] if best else None,
                 shrink_true=shrink, baseline=doc.get("baseline", {}).get("params"),
+                gap=doc.get("gap_beyond_noise"), threshold=doc.get("gap_threshold"),
+                nrmse_before=doc.get("baseline", {}).get("nrmse_holdout"),
+                candidates=[{k: e[k] for k in ("name", "params", "shrink")} for e in doc.get("effects", [])],
                 warnings=doc.get("baseline", {}).get("warnings", []))
 
 

@@ -84,3 +84,21 @@ def test_a_recording_without_motion_gets_a_report_not_a_crash(tmp_path):
     doc = json.loads((tmp_path / "o" / "diagnosis.json").read_text())
     assert doc["judgeable"] is False and "no motion" in doc["reason"] and doc["verdict"] == []
     assert "Cannot be judged" in (tmp_path / "o" / "report.html").read_text()
+
+
+def test_effect_free_recordings_of_other_designs_get_no_verdict_and_no_fits(tmp_path):
+    """No effect; the load off the reference; fit on an operator's manoeuvres, holdout a
+    sine sweep: the baseline explains the holdout within its noise and its own
+    uncertainty, so the verdict is [] and no candidate is fitted."""
+    from boomfmi.diagnose import diagnose
+    from boomfmi.experiments import manoeuvres, sine_sweep
+    cfg = {"params": {"K_v": 2600.0, "F_s": 110.0, "F_d": 88.0, "F_L": 250.0, "M": 21.0}, "seed": 8}
+    fit, hold = manoeuvres(3, duration=8.0), sine_sweep(2, duration=8.0)
+    write_recording(tmp_path / "fit.csv", run_offline(cfg, fit, fit.duration))
+    write_recording(tmp_path / "hold.csv", run_offline(dict(cfg, seed=9), hold, hold.duration))
+    doc = diagnose([tmp_path / "fit.csv"], [tmp_path / "hold.csv"], tmp_path / "out", workers=1)
+    assert doc["verdict"] == [] and not doc["gap_beyond_noise"] and doc["effects"] == []
+    assert sum(doc["baseline"]["nrmse_holdout"].values()) < doc["gap_threshold"]
+    for k, v in cfg["params"].items():
+        assert doc["baseline"]["params"][k] == pytest.approx(v, rel=0.05), k
+    assert "no candidate effect was fitted" in (tmp_path / "out" / "report.html").read_text()

@@ -137,11 +137,32 @@ def test_sensor_lag_smooths_what_the_bridge_reports(fmu, tmp_path):
     assert got[-1] == pytest.approx(0.8, abs=1e-4)
 
 
+def test_a_sensor_dead_time_delays_what_the_bridge_reports_as_the_model_does(fmu, tmp_path):
+    """delay_sensor = 3.5 ms, then tau_sensor: the FMU's outputs are the model's
+    ``measure`` of the recording's samples (dead time, then the lag)."""
+    from boomfmi.model import measure
+    t = np.round(np.arange(0, 0.0505, 1e-3), 6)
+    alpha = 0.7 + 0.1 * np.sin(60.0 * t)
+    path = write_recording(tmp_path / "sine.csv", pd.DataFrame(
+        {"t": t, "u": 5.0, "p_a": 0.0, "p_b": 0.0, "alpha": alpha}))
+    with FmuInstance(fmu("hardware_bridge")) as b:
+        b.initialize(dict(mode="replay", recording=str(path), delay_sensor=0.0035, tau_sensor=0.002))
+        got = []
+        for k_ in range(len(t) - 1):
+            b.step_to(k_ * 1e-3, 1e-3)
+            got.append(b.get("alpha")["alpha"])
+    want = measure(alpha, t, 0.002, 0.0035)[1:]
+    np.testing.assert_allclose(got, want, atol=1e-12)
+    assert abs(got[20] - alpha[21]) > 5e-3          # it is late
+
+
 @pytest.mark.parametrize("name, params, culprit", [
     ("valve", {"deadband": 5.0}, "deadband"), ("valve", {"tau_spool": -1e-3}, "tau_spool"),
     ("cylinder", {"C_leak": -1e-11}, "C_leak"), ("cylinder", {"A_leak": -1e-8}, "A_leak"),
     ("boom_load", {"v_s": -0.01}, "v_s"),
-    ("hardware_bridge", {"tau_sensor": -1.0}, "tau_sensor")])
+    ("hardware_bridge", {"tau_sensor": -1.0}, "tau_sensor"),
+    ("hardware_bridge", {"delay_sensor": -1e-3}, "delay_sensor"),
+    ("cylinder", {"n_poly": 0.5}, "n_poly"), ("cylinder", {"n_poly": 1.5}, "n_poly")])
 def test_bad_effect_parameters_are_fmi_errors(fmu, name, params, culprit):
     with FmuInstance(fmu(name)) as inst:
         with pytest.raises(FmuError) as err:

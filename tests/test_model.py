@@ -68,7 +68,11 @@ def test_the_fmus_declare_each_effect_option_as_the_catalogue_says(fmu):
 
 def test_diagnosis_reads_its_candidates_and_fmu_options_from_the_catalogue(tmp_path):
     assert list(CANDIDATES) == list(EFFECTS)
-    assert FORMS == {"piston_leakage": [[("C", 1e-13, 5e-10, True)], [("A", 1e-10, 2e-7, True)]]}
+    leak_C, leak_A = ("C", 1e-13, 5e-10, True), ("A", 1e-10, 2e-7, True)
+    lag_tau, lag_delay = ("tau", 2e-4, 0.03, True), ("delay", 2e-4, 0.02, True)
+    assert FORMS == {"heat_transfer": [[("h", 1.0, 2000.0, True)], [("n", 1.0, 1.4, False)]],
+                     "piston_leakage": [[leak_C], [leak_A], [leak_C, leak_A]],
+                     "sensor_lag": [[lag_tau], [lag_tau, lag_delay]]}
     data = run_offline({"seed": 1}, random_steps(1, duration=0.2), 0.2)
     rec = Recording(tmp_path / "r.csv", data)
     fx = {n: {p.name: p.upper for p in e.parameters} for n, e in EFFECTS.items()}
@@ -79,7 +83,7 @@ def test_diagnosis_reads_its_candidates_and_fmu_options_from_the_catalogue(tmp_p
 
 
 def test_options_switch_effects_on_only_when_a_switching_parameter_is_set():
-    off = {"h_wall": 0.0, "C_leak": 0.0, "A_leak": 0.0, "l_cushion": 0.0, "A_cushion": 1e-7}
+    off = {"h_wall": 0.0, "n_poly": 0.0, "C_leak": 0.0, "A_leak": 0.0, "l_cushion": 0.0, "A_cushion": 1e-7}
     assert effects_from_options("cylinder", off) == {}
     on = dict(off, A_leak=1e-8, l_cushion=0.01)
     assert effects_from_options("cylinder", on) == {"piston_leakage": {"C": 0.0, "A": 1e-8},
@@ -189,3 +193,20 @@ def test_a_sidecar_that_moves_geometry_valve_and_gas_reaches_every_stage_of_diag
     bare = Recording(hold.path, hold.data)
     at_reference = nrmse(simulate_recording(doc["baseline"]["params"], bare), bare)
     assert sum(at_reference.values()) > 5 * sum(doc["baseline"]["nrmse_holdout"].values())
+
+
+def test_a_polytropic_chamber_keeps_p_V_to_the_n_both_stepped_and_as_an_ode():
+    """heat_transfer's second law: a closed chamber compressed follows P V^n = const, in
+    the discrete step (the FMUs') and in the pressure rates (the reference's)."""
+    from boomfmi import physics as ph
+    boom = Boom(Model(effects={"heat_transfer": {"n": 1.1}}))
+    cyl = boom.cylinder
+    p0 = 3.0e5
+    p_a, p_b = boom.step_chambers(p0, p0, 0.01, 0.03, 0.0, 0.0, 0.0, 0.0, 0.05)
+    (Va0, Vb0), (Va1, Vb1) = ph.chamber_volumes(0.01, cyl), ph.chamber_volumes(0.03, cyl)
+    assert p_a == pytest.approx(p0 * (Va0 / Va1) ** 1.1, rel=1e-12)
+    assert p_b == pytest.approx(p0 * (Vb0 / Vb1) ** 1.1, rel=1e-12)
+    dp_a, _ = boom.pressure_rates(p0, p0, 0.0, 0.0, 0.01, 0.2)
+    assert dp_a == pytest.approx(-1.1 * p0 * cyl.A_a * 0.2 / Va0, rel=1e-12)
+    with pytest.raises(ph.ParameterError, match="at least 1"):
+        Model(effects={"heat_transfer": {"n": 0.5}}).check()

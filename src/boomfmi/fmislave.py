@@ -182,6 +182,11 @@ class BoomSlave(Fmi2Slave):
                 raise ParameterError(var.name, value, f"must be >= {var.min:g} {var.unit}")
             if var.max is not None and value > var.max:
                 raise ParameterError(var.name, value, f"must be <= {var.max:g} {var.unit}")
+        for e in of_fmu(self.modelName):                # an effect option that is on but below its range
+            for q in e.parameters:
+                value = getattr(self, q.option, 0.0)
+                if q.on_min is not None and 0.0 < value < q.on_min:
+                    raise ParameterError(q.option, value, f"must be 0 (off) or at least {q.on_min:g} {q.unit}")
 
     def do_step(self, current_time, step_size):
         if self.failure is not None:

@@ -319,7 +319,10 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     if gap and cands:
         best = cands[0]
         pair = None
-        if best.shrink < MIN_SHRINK or sum(best.holdout.values()) > threshold:
+        # pairs where no single effect explains the gap, or where the best leaves more
+        # than the noise (the baseline's spread no longer counts: the best's fit has
+        # moved the model off the baseline already)
+        if best.shrink < MIN_SHRINK or sum(best.holdout.values()) > NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR:
             pair = _pairs(cands, values, fit_recs, hold_recs, before, threshold, workers)
         if pair is not None:
             pair.score = round(min(1.0, pair.shrink / MIN_SHRINK), 4)

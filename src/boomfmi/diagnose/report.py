@@ -22,7 +22,7 @@ from ..identify import identify_recordings
 from ..identify.preprocess import prepare
 from ..outputs import OutputSet
 from ..recording import check_distinct, check_plausible, read_recording
-from .attribute import CANDIDATES, attribute
+from .attribute import ABS_FLOOR, CANDIDATES, NOISE_FACTOR, attribute
 from .confirm import agreement, confirm
 from .localise import localise
 
@@ -169,7 +169,10 @@ def _html(doc: dict, images: list[str]) -> str:
     if not doc.get("judgeable", True):
         headline = f"Cannot be judged: {e(doc['reason'])}"
     elif verdict == []:
-        headline = "No gap beyond the recordings' noise: the baseline model explains them."
+        headline = ("No gap beyond the recordings' noise and the baseline's own uncertainty: the baseline "
+                    f"model explains them (holdout error {100 * sum((doc['baseline'] or {}).get('nrmse_holdout', {}).values()):.2f} % "
+                    f"against a threshold of {100 * doc.get('gap_threshold', 0.0):.2f} %, summed over p_a, p_b, x); "
+                    "no candidate effect was fitted.")
     elif verdict == ["unexplained"]:
         headline = "A gap that no candidate effect explains (see where it lies below)."
     else:
@@ -198,7 +201,10 @@ td,th{{border:1px solid #ccc;padding:4px 8px;font-size:13px}}</style></head><bod
 Holdout NRMSE p_a / p_b / x: {before}.</p>{warnings}
 <h2>Before and after, on the holdout recording</h2>{imgs}
 <h2>Where the gap lies</h2><table><tr><th>channel</th><th>regime</th><th>subsystem</th><th>share</th><th>windows [s]</th></tr>{where}</table>
-<h2>Candidate effects, best first</h2><table><tr><th>effect</th><th>fitted parameters</th><th>shrink</th><th>score</th>
+<h2>Candidate effects, best first</h2><p>The gap's threshold (summed NRMSE): {100 * doc.get("gap_threshold", 0.0):.3f} %:
+{NOISE_FACTOR:g} times the noise floor {e(json.dumps(doc.get("noise_floor", {})))}, the baseline's own spread
+{e(json.dumps(doc.get("baseline_spread", {})))} and {100 * ABS_FLOOR:g} %.</p>
+<table><tr><th>effect</th><th>fitted parameters</th><th>shrink</th><th>score</th>
 <th>holdout NRMSE after (p_a / p_b / x)</th></tr>{rows}</table>
 {conf}
 </body></html>"""

@@ -69,9 +69,15 @@ def check_effects(effects: dict) -> None:
         unknown = set(params) - set(known)
         if unknown:
             raise ph.ParameterError(f"effects.{name}", sorted(unknown), f"takes {known}")
+        spec = {p.name: p for p in EFFECTS[name].parameters}
         for k, v in params.items():
             if not (v >= 0.0 and math.isfinite(v)):
                 raise ph.ParameterError(f"effects.{name}.{k}", v, "must be a finite number >= 0")
+            q = spec[k]
+            if q.max is not None and v > q.max:
+                raise ph.ParameterError(f"effects.{name}.{k}", v, f"must be at most {q.max:g}")
+            if q.on_min is not None and 0.0 < v < q.on_min:
+                raise ph.ParameterError(f"effects.{name}.{k}", v, f"must be 0 (off) or at least {q.on_min:g}")
 
 
 def _param(effects: dict, name: str, parameter: str) -> float:
@@ -96,6 +102,10 @@ class Boom:
         self.friction_effects = stage("friction")
         self.tau_spool = _param(on, "valve_dynamics", "tau")
         self.h_wall = _param(on, "heat_transfer", "h")
+        n_poly = _param(on, "heat_transfer", "n")
+        #: the gas as the chambers' process sees it: k replaced by the polytropic
+        #: exponent where heat_transfer's second law is on (the orifices keep k)
+        self.chamber_gas = self.gas._replace(k=n_poly) if n_poly > 0.0 else self.gas
         self.tau_sensor = _param(on, "sensor_lag", "tau")
         self.delay_sensor = _param(on, "sensor_lag", "delay")
         self.bore = math.sqrt(4.0 * self.cylinder.A_a / math.pi)   #: for the wall's area [m]
@@ -154,7 +164,7 @@ class Boom:
         With heat_transfer on, ``masses`` holds the chambers' air masses [kg], updated
         in place, and each pressure relaxes towards its isothermal level.  Returns
         ``(p_a, p_b)``."""
-        cyl, gas = self.cylinder, self.gas
+        cyl, gas = self.cylinder, self.chamber_gas
         V_a0, V_b0 = ph.chamber_volumes(x0, cyl)
         V_a1, V_b1 = ph.chamber_volumes(x1, cyl)
         p_a1 = ph.chamber_pressure_step(p_a, V_a0, V_a1, m_a, dt, gas, s_a)
@@ -162,7 +172,7 @@ class Boom:
         if self.h_wall > 0.0:
             masses[0] += dt * (m_a + 0.5 * s_a * (p_a1 - p_a))
             masses[1] += dt * (m_b + 0.5 * s_b * (p_b1 - p_b))
-            R, T, k, h = gas.R, gas.T, gas.k, self.h_wall
+            R, T, k, h = gas.R, gas.T, self.gas.k, self.h_wall     # (c_v is the air's, whatever the process)
             tau = fx.thermal_time_constant(masses[0], fx.chamber_wall_area(V_a1, cyl.A_a, self.bore), h, k, R)
             p_a1 = fx.thermal_relaxation_step(p_a1, masses[0], V_a1, dt, tau, R, T)
             tau = fx.thermal_time_constant(masses[1], fx.chamber_wall_area(V_b1, cyl.A_b, self.bore), h, k, R)
@@ -173,7 +183,7 @@ class Boom:
                        masses=None):
         """dp_a/dt, dp_b/dt [Pa/s] (Eq. 5 to 7), with heat_transfer's relaxation towards
         the isothermal pressure of the air ``masses`` [kg] where it is on."""
-        dp_a, dp_b = ph.pressure_rates(p_a, p_b, m_a, m_b, x, v, self.cylinder, self.gas)
+        dp_a, dp_b = ph.pressure_rates(p_a, p_b, m_a, m_b, x, v, self.cylinder, self.chamber_gas)
         if self.h_wall > 0.0:
             cyl, (k, R, T) = self.cylinder, self.gas
             V_a, V_b = ph.chamber_volumes(x, cyl)

@@ -49,6 +49,7 @@ class Parameter(NamedTuple):
     start: float = 0.0  #: the FMU variable's start value
     switch: bool = True  #: a value > 0 switches the effect on (False: a setting only)
     max: Optional[float] = None  #: the FMU variable's declared maximum
+    on_min: Optional[float] = None  #: the least value that is on (0 < value < on_min is refused)
 
 
 class Effect(NamedTuple):
@@ -129,9 +130,14 @@ EFFECTS = {e.name: e for e in (
            _deadband),
     Effect("heat_transfer", "cylinder", "heat",
            ((_p("h", "W/(m2.K)", 1.0, 2000.0, True, "h_wall",
-                "heat_transfer: heat-transfer coefficient between the air and the chamber wall; 0: off"),),),
+                "heat_transfer: heat-transfer coefficient between the air and the chamber wall; 0: off"),),
+            (_p("n", "1", 1.0, 1.4, False, "n_poly",
+                "heat_transfer: polytropic exponent of the chambers' process, in place of k in Eq. 4 to 7 "
+                "(1: isothermal, 1.4: isentropic); 0: off", max=1.4, on_min=1.0),)),
            "the pressure relaxes towards the isothermal m R T_w / V with time constant "
-           "m c_v / (h A_wall), A_wall the wall the air touches (end faces and barrel)"),
+           "m c_v / (h A_wall), A_wall the wall the air touches (end faces and barrel, growing with "
+           "the chamber's length); or the chambers follow a polytropic process of exponent n "
+           "between isothermal and isentropic, whichever fits"),
     Effect("piston_leakage", "cylinder", "seal",
            ((_C_LEAK,), (_A_LEAK,), (_C_LEAK, _A_LEAK)),
            "a leak A -> B across the seal: laminar C (p_a - p_b), turbulent through a gap "

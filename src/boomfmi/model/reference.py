@@ -65,7 +65,7 @@ def rhs(boom: Boom, layout: Layout, u: float, f_ext: float, mode: int, y) -> lis
     if boom.inflow_effects:
         mdot_a, mdot_b, _, _ = boom.inflows(mdot_a, mdot_b, None, None, p_a, p_b, x)
     if i_m is None:
-        dp_a, dp_b = ph.pressure_rates(p_a, p_b, mdot_a, mdot_b, x, v, boom.cylinder, boom.gas)
+        dp_a, dp_b = ph.pressure_rates(p_a, p_b, mdot_a, mdot_b, x, v, boom.cylinder, boom.chamber_gas)
     else:
         dp_a, dp_b = boom.pressure_rates(p_a, p_b, mdot_a, mdot_b, x, v, (y[i_m], y[i_m + 1]))
     extra = []
