@@ -48,7 +48,9 @@ def test_sound_fit_recovers_the_parameters_within_5_percent(recordings):
         est = result.params[k]
         assert est.value == pytest.approx(v, rel=0.05), k
         assert est.ci95[0] < est.value < est.ci95[1]
-    assert result.warnings == []
+    # the paper's starts are all from the stops, most of them under a full opening: F_s
+    # comes out right, but its interval is too wide to call it identified, and identify says so
+    assert all("cannot tell F_s" in w for w in result.warnings)
     hold = read_recording(d / "hold.csv")
     assert nrmse(simulate_recording(result.values(), hold), hold)["x"] < 0.02
 

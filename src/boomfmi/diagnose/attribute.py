@@ -68,6 +68,7 @@ MIN_SHRINK_SECOND = 0.4     #: the share of the gap left by the best that a seco
 PAIR_POOL = 3               #: the candidates among which pairs are tried
 SCREEN_POINTS = 4           #: points per parameter that screen an effect's range
 SCREEN = 0.02               #: the share of the fit error a screened point must remove to go on
+PAIR_EVALUATIONS = 24       #: the joint fit of a pair: its simplex's evaluations at most
 RTOL = 1e-5            #: the reference solver's tolerance when scoring
 FIT_RTOL = 1e-4        #: and while fitting (each fit runs the model a dozen times or more)
 
@@ -124,7 +125,7 @@ class Candidate:
 
 def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = None,
                 fixed: dict | None = None, forms: dict | None = None,
-                baseline_cost: float | None = None) -> tuple[dict, float]:
+                baseline_cost: float | None = None, max_evaluations: int = 40) -> tuple[dict, float]:
     """Fit the parameters of the effects ``names`` together on the fit recordings:
     ``({name: {param: value}}, cost)``.
 
@@ -156,7 +157,7 @@ def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = N
         z0 = [min(max(math.log10(start[n][p]) if log else start[n][p], b[0]), b[1])
               for (n, p, lo, hi, log), b in zip(spec, bounds)]
         res = minimize(cost, z0, method="Nelder-Mead", bounds=bounds,
-                       options={"maxfev": 40, "xatol": 1e-3, "fatol": 1e-9})
+                       options={"maxfev": max_evaluations, "xatol": 1e-3, "fatol": 1e-9})
         return to_effects(res.x), float(res.fun)
     points = SCREEN_POINTS if len(spec) == 1 else SCREEN_POINTS - 1
     levels = [lo + (np.arange(points) + 0.5) / points * (hi - lo) for lo, hi in bounds]
@@ -347,15 +348,21 @@ def _pairs(cands, values, fit_recs, hold_recs, before, threshold, workers):
     noise from being explained by a second effect)."""
     pool = [c for c in cands if c.shrink > 0.0][:PAIR_POOL]
     by_name = {c.name: c for c in cands}
+    # where the best explains the gap on its own, a pair must hold it (another pair
+    # would have to beat it with two effects the best does not need)
+    combos = ([(pool[0], c) for c in pool[1:]] if pool and pool[0].shrink >= MIN_SHRINK
+              else list(itertools.combinations(pool, 2)))
     # a pair with a friction effect keeps the load identified with it
     jobs = [([a.name, b.name], a.values or b.values or values, fit_recs, hold_recs,
-             {a.name: a.params, b.name: b.params})
-            for a, b in itertools.combinations(pool, 2)]
+             {a.name: a.params, b.name: b.params}, min(a.fit_error, b.fit_error))
+            for a, b in combos]
     if not jobs:
         return None
-    fitted = _map(_fit_pair, jobs, workers)
     best = None
-    for (pair_names, fx, cost, after), job in zip(fitted, jobs):
+    for job, fitted in zip(jobs, _map(_fit_pair, jobs, workers)):
+        if fitted is None:
+            continue
+        pair_names, fx, cost, after = fitted
         joint = job[1] if job[1] is not values else None
         cand = Candidate("+".join(pair_names), fx, cost, after, shrink(before, after), values=joint)
         pays = all(shrink(by_name[other].holdout, after) >= MIN_SHRINK_SECOND
@@ -366,8 +373,14 @@ def _pairs(cands, values, fit_recs, hold_recs, before, threshold, workers):
 
 
 def _fit_pair(args):
-    names, values, fit_recs, hold_recs, start = args
-    fx, cost = fit_effects(names, values, fit_recs, start=start,
+    """A pair fitted jointly from its singles' fits; None where, at that start, the pair
+    does not lower the fit error below its better single's by SCREEN (the second
+    effect adds nothing there, and a joint fit would only chase the noise)."""
+    names, values, fit_recs, hold_recs, start, single_cost = args
+    at_start = sum(e * e for e in mean_errors(values, start, fit_recs, FIT_RTOL).values())
+    if at_start > (1.0 - SCREEN) * single_cost:
+        return None
+    fx, cost = fit_effects(names, values, fit_recs, start=start, max_evaluations=PAIR_EVALUATIONS,
                            forms={n: [(q.name, q.lower, q.upper, q.log) for q in EFFECTS[n].parameters
                                       if q.name in start[n]] for n in names})
     return names, fx, cost, mean_errors(values, fx, hold_recs)
