@@ -41,10 +41,14 @@ x = 0.  Mode changes are located by ``solve_ivp`` terminal events: v crossing 0 
 slipping, F_drive reaching +-(static level) cos(phi) while sticking, x reaching 0 or L,
 F_drive turning away from the stop while held there (and, sticking at a stroke end,
 F_drive turning back into the stop).  Command changes and disturbance switch times are
-breakpoints: the integration restarts at each.  The command the valve sees is the
+breakpoints: the integration restarts at each.  A chamber at rest that reaches its open
+port's source pressure is *locked* there (event located; see ``_Model.lockable``): the
+orifice law's flow ~ sqrt(P_u - P_d) makes that a finite-time, infinite-Jacobian
+approach that integrators otherwise crawl across.  The command the valve sees is the
 profile sampled at the DAQ instants k/fs and held (a DAQ card's zero-order hold); a
 profile without ``breakpoints``, one with ``continuous = True``, or ``hold=False`` is
-evaluated continuously instead.  The method is LSODA (switches to BDF when stiff).
+evaluated continuously instead.  The method is LSODA (switching to BDF when stiff); a
+solve where it crawls (over a budget of RHS calls) or fails is redone with scipy's BDF.
 
 API
 ---
@@ -498,14 +502,18 @@ class _Model:
         #: infinite Jacobian there, and stays (the unique forward solution: the law is
         #: dissipative).  Integrators crawl across that point, so it is located as an event
         #: and the chamber held there exactly while nothing else moves its pressure: the
-        #: piston at rest (stick or stop), no leakage, no heat exchange, a constant source
-        #: (no supply sag) and no port volume.  A lock ends when the piston moves or the
-        #: routing changes.
-        self.lockable = not (self.leak or self.wall or self.sag or self.port)
+        #: piston at rest (stick or stop), no leakage, no heat exchange (h_c = 0 is fine)
+        #: and a constant source (no supply sag).  With a port volume the chamber and its
+        #: port are locked together once both are within LOCK_TOL of the source.  A lock
+        #: ends when the piston moves or the routing changes.
+        self.lockable = not (self.leak or (self.wall and self.h_c != 0.0) or self.sag)
+        self.lock_nodes = ((2, self.idx["pp_a"]), (3, self.idx["pp_b"])) if self.port else ((2,), (3,))
 
     # ---------------------------------------------------------------- pieces
     def orifice(self, A, Pu, Pd, Tu):
-        """Mass flow [kg/s] from Pu to Pd (Pu >= Pd) through area A."""
+        """Mass flow [kg/s] from Pu to Pd (Pu >= Pd) through area A (reference-rig.md's law).
+        A non-positive upstream pressure only occurs in a solver's rejected trial step (every
+        accepted state is checked): no flow there."""
         if A <= 0.0 or Pu <= 0.0:
             return 0.0
         r = Pd / Pu
@@ -521,20 +529,18 @@ class _Model:
         return -self.orifice(A, P2, P1, T2)
 
     def opening(self, s):
-        """Valve area [m^2] at spool position s [V]."""
+        """Valve area [m^2] at spool position s [V]: A_max min(|s - 5| / 5, 1), or with the
+        deadband's overlap d (and rounded edge w) the excess over d, rescaled to 5 - d."""
         e = abs(s - 5.0)
-        if self.db:
-            d, w = self.db_d, self.db_w
-            ex = e - d
-            if w > 0.0 and ex > -w:
-                if ex < w:
-                    ex = (ex + w) ** 2 / (4.0 * w)
-            elif ex <= 0.0:
-                return 0.0
-            if ex <= 0.0:
-                return 0.0
-            return self.plant.A_max * min(ex / (5.0 - d), 1.0)
-        return self.plant.A_max * min(e / 5.0, 1.0)
+        if not self.db:
+            return self.plant.A_max * min(e / 5.0, 1.0)
+        d, w = self.db_d, self.db_w
+        ex = e - d
+        if w > 0.0 and -w < ex < w:
+            ex = (ex + w) ** 2 / (4.0 * w)           # C1 quadratic edge
+        if ex <= 0.0:
+            return 0.0
+        return self.plant.A_max * min(ex / (5.0 - d), 1.0)
 
     def geometry(self, x):
         p = self.plant
@@ -682,14 +688,16 @@ class _Model:
             m_vb = 0.0 if locks[1] else self.flow(area_b, ob, nb, T, Tnb)
             m_sup = m_va if s < 5.0 else m_vb
 
-        # chamber mass flows, as lists of (mdot into the chamber, temperature of inflowing gas)
-        ma_net = mb_net = 0.0          # sums
-        Ha = Hb = 0.0                  # sum(mdot T_i), energy form
+        # chamber mass flows: net mdot into each chamber, and sum(mdot_i T_i) (inflow at its
+        # source's temperature, outflow at the chamber's) for the energy form
+        ma_net = mb_net = 0.0
+        Ha = Hb = 0.0
         if self.port:
             # chamber <-> port: free bore outside the cushion, needle/check valve inside
             m_ca = self._port_flow(pa, na, fa, Ta)          # port -> chamber A
             m_cb = self._port_flow(pb, nb, fb, Tb)
-            # port volumes (no volume change; gas at T)
+            # port volumes: rigid, their gas taken at T (the hose walls hold it there), with
+            # the chamber equation's exponent
             kap = self.kappa
             dy[idx["pp_a"]] = kap * R * T * (m_va - m_ca) / self.V_p
             dy[idx["pp_b"]] = kap * R * T * (m_vb - m_cb) / self.V_p
@@ -846,9 +854,11 @@ class _Model:
         src = self.sources(side)
         out = []
         for j in (0, 1):
-            hit = abs(y[2 + j] - src[j]) <= 2.0 * LOCK_TOL * src[j]
+            nodes = self.lock_nodes[j]
+            hit = all(abs(y[i] - src[j]) <= 2.0 * LOCK_TOL * src[j] for i in nodes)
             if hit:
-                y[2 + j] = src[j]
+                for i in nodes:
+                    y[i] = src[j]
             out.append(hit)
         return tuple(out)
 
@@ -858,6 +868,14 @@ class _Model:
         src = self.sources(side)
         for j, key in ((0, "lock_a"), (1, "lock_b")):
             if locks[j]:
+                continue
+            if self.port:
+                # chamber and port converge on the source together (the chamber through the
+                # free bore or the needle, the port through the valve): both within LOCK_TOL
+                def g(t, y, ic=2 + j, ip=self.lock_nodes[j][1], ps=src[j]):
+                    return max(abs(y[ic] - ps), abs(y[ip] - ps)) - LOCK_TOL * ps
+                g.terminal, g.direction = True, -1
+                evs.append((g, key))
                 continue
             below = y[2 + j] < src[j]
             level = src[j] * (1.0 - LOCK_TOL if below else 1.0 + LOCK_TOL)
@@ -981,6 +999,29 @@ class _Model:
 
 
 # --------------------------------------------------------------------------- simulate
+#: Work a solve may take before it is redone with the other method: RHS calls, fixed
+#: plus per simulated second (LSODA needs ~1e3 per second here; where it crawls, near
+#: the orifice law's singular point with heat exchange or a port volume, BDF does not).
+BUDGET = (20000, 20000)
+
+
+class _OverBudget(Exception):
+    pass
+
+
+def _budgeted(fun, budget):
+    if budget is None:
+        return fun
+    count = [0]
+
+    def wrapped(t, y):
+        count[0] += 1
+        if count[0] > budget:
+            raise _OverBudget
+        return fun(t, y)
+    return wrapped
+
+
 def _command_plan(profile, duration, ts, hold):
     """(u at the samples, segments [(t_start, t_end, command)]) where command is a
     float (held) or a callable of t."""
@@ -1071,10 +1112,11 @@ def simulate(plant: Plant | None, profile, duration=None, fs=None, seed=0, x0=No
     stats = {"segments": 0, "transitions": 0, "nfev": 0, "fallbacks": 0}
     events = []                           # (t, event kind, mode before, mode after)
     if method == "auto":
-        # LSODA (Adams, switching to BDF where stiff) is fastest here, but its stiffness
-        # detection misses the port volume's stiff, non-Lipschitz coupling, where BDF is
-        # 30 times faster; each falls back on the other where it fails
-        methods = ("BDF", "LSODA") if m.port else ("LSODA", "BDF")
+        # LSODA (Adams, switching to BDF where stiff) is ten times faster than scipy's BDF
+        # here, but crawls near the orifice law's singular point where something keeps a
+        # small flow going (heat exchange, a port volume): a solve that overruns BUDGET,
+        # or fails, is redone with BDF
+        methods = ("LSODA", "BDF")
     else:
         methods = (method,)
     ie = 0
@@ -1110,12 +1152,20 @@ def simulate(plant: Plant | None, profile, duration=None, fs=None, seed=0, x0=No
             fun = (lambda mo, uc, lk: (lambda tt, yy: m.derivs(tt, yy, mo, uc, lk)))(mode, ucmd, locks)
             t_eval = np.append(want[ie:j], tb)
             sol, why = None, ""
-            for meth in methods:
+            for k_meth, meth in enumerate(methods):
+                last = k_meth == len(methods) - 1
+                budget = None if last else BUDGET[0] + BUDGET[1] * (tb - t)
                 try:
-                    sol = solve_ivp(fun, (t, tb), y, method=meth, t_eval=t_eval, events=[e for e, _ in evs],
-                                    rtol=rtol, atol=atol, max_step=max_step)
+                    sol = solve_ivp(_budgeted(fun, budget), (t, tb), y, method=meth, t_eval=t_eval,
+                                    events=[e for e, _ in evs], rtol=rtol, atol=atol, max_step=max_step)
+                except _OverBudget:
+                    sol, why = None, f"{meth} needed more than {budget:.0f} RHS calls"
+                    stats["nfev"] += int(budget)
+                    stats["fallbacks"] += 1
+                    continue
                 except ValueError as exc:        # an event root bracketed only to rounding
                     sol, why = None, str(exc)
+                    stats["fallbacks"] += 1
                     continue
                 stats["nfev"] += sol.nfev
                 if sol.status >= 0:
@@ -1146,7 +1196,8 @@ def simulate(plant: Plant | None, profile, duration=None, fs=None, seed=0, x0=No
                     new, y = mode, np.array(ye, dtype=float)
                     if kind != "route":      # the chamber reached its source: hold it there
                         c = 0 if kind == "lock_a" else 1
-                        y[2 + c] = m.sources(side)[c]
+                        for node in m.lock_nodes[c]:
+                            y[node] = m.sources(side)[c]
                     else:
                         route_flips += 1
                         if m.vd:             # the spool at the centre, exactly

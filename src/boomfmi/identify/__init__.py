@@ -16,7 +16,7 @@ from ..compare import nrmse, recorded, rig_model, simulate_recording
 from ..outputs import OutputSet
 from ..recording import check_distinct, check_plausible, read_recording
 from ..system.ssv import write_ssv
-from .fit import FitResult, identify
+from .fit import FitResult, fit_A_max, identify
 from .paper import identify_paper
 from .preprocess import CUTOFF, prepare
 
@@ -51,7 +51,32 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
     result.details["recordings"] = [str(p) for p in paths]
     result.details["cutoff_Hz"] = cutoff
     _check_physical(result, paths)
+    if method == "fit":
+        _check_time_scale(preps, rig, paths)
     return result, recs, preps
+
+
+#: The valve's area the chambers' filling and emptying imply, over the rig's A_max,
+#: beyond which a recording's time or pressure scale is taken to be wrong.
+FLOW_SCALE = 3.0
+
+
+def _check_time_scale(preps, rig, paths) -> None:
+    """The chambers fill and empty at the rate the rig's valve allows (Eq. 1 and 7:
+    the effective A_max from the mass balance, ``fit.fit_A_max``, within a factor
+    FLOW_SCALE of the rig's).  A recording whose time runs ten times slow, or whose
+    pressures are in the wrong unit, fails this where the load's equations alone would
+    fit it with values no machine has but that look plausible one by one."""
+    a = fit_A_max(preps, rig.cylinder, rig.valve, rig.gas)
+    if a is None:
+        return
+    ratio = a.value / rig.valve.A_max
+    if not 1.0 / FLOW_SCALE < ratio < FLOW_SCALE:
+        raise ValueError(f"identification from {', '.join(str(p) for p in paths)}: the chambers fill and empty "
+                         f"{ratio:.2g} times as fast as the rig's valve allows (the pressures imply an orifice "
+                         f"of {a.value:.3g} m2, the rig's A_max is {rig.valve.A_max:.3g} m2); no machine has such "
+                         f"values: check the recordings' units (t in s, pressures in Pa gauge), or give the rig's "
+                         f"own valve and supply in the recording's sidecar")
 
 
 #: Identified parameters that no machine has below these values (M and A_max: above)
