@@ -128,7 +128,7 @@ def main(argv=None) -> int:
     for label, method, f in rows:
         if f["peak"] > 0:
             at_bound = abs(f["lag"]) >= 0.299
-            lag_text = f"beyond +-300 ms (no peak)" if at_bound else f"{1e3 * f['lag']:.0f} ms"
+            lag_text = "beyond +-300 ms (no peak)" if at_bound else f"{1e3 * f['lag']:.0f} ms"
             lines.append(f"| {label} | {method} | {f['peak']:.0f} N | {100 * f['rmse'] / f['peak']:.1f} % | "
                          f"{lag_text} | {100 * f['false'] / f['peak']:.1f} % | {100 * f['judged']:.0f} % |")
         else:

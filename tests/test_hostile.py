@@ -14,7 +14,6 @@ import time
 import zipfile
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from boomfmi.diagnose import diagnose
@@ -22,7 +21,6 @@ from boomfmi.diagnose import report as diagnosis_report
 from boomfmi.experiments import paper_multistep, random_steps
 from boomfmi.identify import identify_recordings, write_outputs
 from boomfmi import identify as identification
-from boomfmi.physics import reference_rig
 from boomfmi.recording import RecordingError, check_plausible, read_recording, write_recording
 from boomfmi.rig.offline import run_offline
 from boomfmi.simulate import run_experiment

@@ -77,19 +77,7 @@ def simulate_recording(values: dict, rec: Recording, effects: dict | None = None
     def command(s):
         i = max(0, int(np.searchsorted(t, s + t0 + 1e-9, side="right")) - 1)
         return {"u": float(u[i])}
-    u_between = None
-    if len(small):
-        # the ramp within each stretch between steps: knots at the samples' midpoints,
-        # never interpolated across a step
-        seg = np.concatenate(([0], np.cumsum(jumps)))      # the stretch of each sample
-        mid = t - t0 + 0.5 * np.median(np.diff(t))
-
-        def u_between(s):
-            i = max(0, int(np.searchsorted(t, s + t0 + 1e-9, side="right")) - 1)
-            j = i + 1 if s >= mid[i] else i - 1          # the neighbouring knot on s's side
-            if j < 0 or j >= len(u) or seg[j] != seg[i]:
-                return float(u[i])                       # at a stretch's end: held
-            return float(u[i] + (s - mid[i]) / (mid[j] - mid[i]) * (u[j] - u[i]))
+    u_between = _ramp(t - t0, u, jumps) if len(small) else None
     model = model_for(values, effects, rig)
     model.x0, model.p_a0, model.p_b0 = initial_state(rec, rig)
     sim = simulate_reference(model, command, float(t[-1] - t0), times=t - t0, breakpoints=changes - t0,
@@ -98,6 +86,23 @@ def simulate_recording(values: dict, rec: Recording, effects: dict | None = None
     sim["p_a"] -= rig.P_atm
     sim["p_b"] -= rig.P_atm
     return sim
+
+
+def _ramp(t: np.ndarray, u: np.ndarray, jumps: np.ndarray):
+    """The sampled command ``u`` on times ``t`` [s] as a function of time that ramps
+    through its samples' midpoints (half a sample after each sample: the held
+    staircase's mean delay), never across a step (``jumps[k]``: a step between sample k
+    and k + 1), held at a stretch's ends."""
+    seg = np.concatenate(([0], np.cumsum(jumps)))      # the stretch of each sample
+    mid = t + 0.5 * np.median(np.diff(t))
+
+    def u_between(s: float) -> float:
+        i = max(0, int(np.searchsorted(t, s + 1e-9, side="right")) - 1)
+        j = i + 1 if s >= mid[i] else i - 1          # the neighbouring knot on s's side
+        if j < 0 or j >= len(u) or seg[j] != seg[i]:
+            return float(u[i])
+        return float(u[i] + (s - mid[i]) / (mid[j] - mid[i]) * (u[j] - u[i]))
+    return u_between
 
 
 def recorded(rec: Recording, rig: Model | None = None) -> dict:
