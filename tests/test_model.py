@@ -210,3 +210,30 @@ def test_a_polytropic_chamber_keeps_p_V_to_the_n_both_stepped_and_as_an_ode():
     assert dp_a == pytest.approx(-1.1 * p0 * cyl.A_a * 0.2 / Va0, rel=1e-12)
     with pytest.raises(ph.ParameterError, match="at least 1"):
         Model(effects={"heat_transfer": {"n": 0.5}}).check()
+
+
+def test_air_leaving_a_chamber_takes_its_own_temperature_an_isentropic_blowdown():
+    """heat_transfer's wall law tracks each chamber's air mass, so the air that leaves
+    carries the chamber's own temperature (p V / (m R)), not the reference one: a rigid
+    chamber emptying with (almost) no heat exchange keeps p / m^k constant, the
+    isentropic blowdown, in the pressure rates (the reference's) and in the discrete step
+    (the FMUs')."""
+    from scipy.integrate import solve_ivp
+    from boomfmi import physics as ph
+    boom = Boom(Model(effects={"heat_transfer": {"h": 1e-9}}))
+    x, p0, mdot = 0.02, 6.0e5, -2e-4
+    V = ph.chamber_volumes(x, boom.cylinder)[0]
+    m0 = boom.air_masses(p0, p0, x)[0]
+
+    def rates(_, y):
+        dp, _ = boom.pressure_rates(y[0], p0, mdot, 0.0, x, 0.0, (y[1], m0))
+        return [dp, mdot]
+    sol = solve_ivp(rates, (0.0, 0.05), [p0, m0], rtol=1e-10, atol=[1e-6, 1e-14])
+    p, m = sol.y[:, -1]
+    assert m == pytest.approx(m0 + 0.05 * mdot, rel=1e-9)
+    assert p == pytest.approx(p0 * (m / m0) ** 1.4, rel=1e-6)
+    masses, p_step = [m0, m0], p0
+    for _ in range(500):
+        p_step, _ = boom.step_chambers(p_step, p0, x, x, mdot, 0.0, 0.0, 0.0, 1e-4, masses)
+    assert p_step == pytest.approx(p, rel=2e-3)
+    assert ph.effects.outflow_temperature_rate(p0, m0, V, 1e-4, 1.4, 287.0, 293.15) == 0.0   # inflow: none

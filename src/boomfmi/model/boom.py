@@ -170,9 +170,13 @@ class Boom:
         p_a1 = ph.chamber_pressure_step(p_a, V_a0, V_a1, m_a, dt, gas, s_a)
         p_b1 = ph.chamber_pressure_step(p_b, V_b0, V_b1, m_b, dt, gas, s_b)
         if self.h_wall > 0.0:
+            R, T, k, h = gas.R, gas.T, self.gas.k, self.h_wall     # (c_v is the air's, whatever the process)
+            # outflowing air leaves at the chamber's own temperature (from the mass held
+            # at the step's start), not at the reference one
+            p_a1 += dt * fx.outflow_temperature_rate(p_a, masses[0], V_a0, m_a, k, R, T)
+            p_b1 += dt * fx.outflow_temperature_rate(p_b, masses[1], V_b0, m_b, k, R, T)
             masses[0] += dt * (m_a + 0.5 * s_a * (p_a1 - p_a))
             masses[1] += dt * (m_b + 0.5 * s_b * (p_b1 - p_b))
-            R, T, k, h = gas.R, gas.T, self.gas.k, self.h_wall     # (c_v is the air's, whatever the process)
             tau = fx.thermal_time_constant(masses[0], fx.chamber_wall_area(V_a1, cyl.A_a, self.bore), h, k, R)
             p_a1 = fx.thermal_relaxation_step(p_a1, masses[0], V_a1, dt, tau, R, T)
             tau = fx.thermal_time_constant(masses[1], fx.chamber_wall_area(V_b1, cyl.A_b, self.bore), h, k, R)
@@ -189,10 +193,10 @@ class Boom:
             V_a, V_b = ph.chamber_volumes(x, cyl)
             m = masses[0]
             tau = fx.thermal_time_constant(max(m, 1e-12), fx.chamber_wall_area(V_a, cyl.A_a, self.bore), self.h_wall, k, R)
-            dp_a += fx.thermal_relaxation_rate(p_a, m, V_a, tau, R, T)
+            dp_a += fx.thermal_relaxation_rate(p_a, m, V_a, tau, R, T) + fx.outflow_temperature_rate(p_a, m, V_a, m_a, k, R, T)
             m = masses[1]
             tau = fx.thermal_time_constant(max(m, 1e-12), fx.chamber_wall_area(V_b, cyl.A_b, self.bore), self.h_wall, k, R)
-            dp_b += fx.thermal_relaxation_rate(p_b, m, V_b, tau, R, T)
+            dp_b += fx.thermal_relaxation_rate(p_b, m, V_b, tau, R, T) + fx.outflow_temperature_rate(p_b, m, V_b, m_b, k, R, T)
         return dp_a, dp_b
 
     # ------------------------------------------------------------------- load

@@ -55,6 +55,19 @@ def thermal_relaxation_rate(p: float, m: float, V: float, tau: float, R: float, 
     return (m * R * T_wall / V - p) / tau
 
 
+def outflow_temperature_rate(p: float, m: float, V: float, mdot: float, k: float, R: float, T: float) -> float:
+    """The correction to d/dt of a chamber's pressure [Pa/s] where its air, tracked as
+    mass ``m`` [kg] at pressure ``p`` [Pa] in volume ``V`` [m^3] (so at temperature
+    ``T_c = p V / (m R)``), leaves at its own temperature rather than at the reference
+    ``T`` [K] Eq. 4 assumes: ``k R mdot (T_c - T) / V`` for an outflow (``mdot`` < 0
+    [kg/s]), 0 for an inflow (air enters at the supply's T).  With it the chamber's
+    energy balance is the full one (Richer and Hurmuzlu 2000, Eq. 10), heat exchange
+    with the wall included."""
+    if mdot >= 0.0 or m <= 0.0:
+        return 0.0
+    return k * R * mdot * (p * V / (m * R) - T) / V
+
+
 def chamber_wall_area(V: float, A_piston: float, bore: float) -> float:
     """The wall [m^2] a chamber's air of volume ``V`` [m^3] touches: the two end faces
     ``2 A_piston`` and the barrel over the chamber's equivalent length ``V / A_piston``
