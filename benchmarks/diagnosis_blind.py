@@ -144,11 +144,11 @@ def _plant(case: dict, effects=None, disturbances=None) -> hr.Plant:
                     sensors=dict(SENSORS[case["sensor"]]))
 
 
-def _true_errors(with_it, without, rec) -> float:
-    """Summed NRMSE (x, p_a, p_b) between two runs' true signals, over the recording's
+def _true_errors(with_it, without) -> float:
+    """Summed NRMSE (x, p_a, p_b) between two runs' true signals, over the first's
     ranges."""
     total = 0.0
-    for col, rec_col in (("x_true", None), ("p_a_true", "p_a"), ("p_b_true", "p_b")):
+    for col in ("x_true", "p_a_true", "p_b_true"):
         a, b = with_it[col].to_numpy(), without[col].to_numpy()
         span = float(np.ptp(a)) or 1.0
         total += float(np.sqrt(np.mean((a - b) ** 2)) / span)
@@ -176,9 +176,9 @@ def make_recordings(case: dict, cache: Path) -> dict:
         diffs = {}
         for n in case["effects"]:
             without = hr.simulate(_plant(case, {k: v for k, v in case["effects"].items() if k != n}), prof, seed=seed)
-            diffs[n] = _true_errors(frame, without, None)
+            diffs[n] = _true_errors(frame, without)
         for n in case["disturbances"]:
-            diffs[n] = _true_errors(frame, hr.simulate(_plant(case, disturbances={}), prof, seed=seed), None)
+            diffs[n] = _true_errors(frame, hr.simulate(_plant(case, disturbances={}), prof, seed=seed))
         suffix = "" if key == "hold" else "_fit"
         info["difference" + suffix] = diffs
         info["margin" + suffix] = NOISE_FACTOR * noise + ABS_FLOOR

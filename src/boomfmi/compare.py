@@ -113,13 +113,15 @@ def recorded(rec: Recording, rig: Model | None = None) -> dict:
             "p_a": rec.data["p_a"].to_numpy(float), "p_b": rec.data["p_b"].to_numpy(float)}
 
 
-def nrmse(sim, rec: Recording, rig: Model | None = None) -> dict:
+def nrmse(sim, rec: Recording, rig: Model | None = None, against=None) -> dict:
     """NRMSE of x, p_a, p_b: RMS error over the recording's range.  ``sim`` maps each
-    channel to values on the recording's samples (gauge pressures)."""
+    channel to values on the recording's samples (gauge pressures); ``against``, so
+    mapped too, in place of the recording (two models compared on its scale)."""
     out = {}
     for name, measured in recorded(rec, rig).items():
         span = float(np.ptp(measured)) or 1.0
-        out[name] = float(np.sqrt(np.mean((np.asarray(sim[name], float) - measured) ** 2)) / span)
+        ref = measured if against is None else np.asarray(against[name], float)
+        out[name] = float(np.sqrt(np.mean((np.asarray(sim[name], float) - ref) ** 2)) / span)
     return out
 
 

@@ -214,16 +214,17 @@ def _fit_friction(name, fit_recs, hold_recs):
     (param, lo, hi, log), = CANDIDATES[name]
     rig = rig_model(fit_recs[0])
     preps = [prepare(r, geometry=rig.geometry, P_atm=rig.P_atm) for r in fit_recs]
+    def fitted(v_s):         # (how far the velocity fit misses, the load) at v_s
+        res = identify(preps, rig.cylinder, rig.P_atm, valve=rig.valve, gas=rig.gas, v_s=v_s)
+        return res.details.get("velocity_error", {}).get("rms_velocity_m_s", math.inf), res.values()
     seen = {}
 
     def misfit(z):
         v_s = float(10 ** z)
         if v_s not in seen:
-            res = identify(preps, rig.cylinder, rig.geometry, rig.P_atm, valve=rig.valve, gas=rig.gas, v_s=v_s)
-            seen[v_s] = (res.details.get("velocity_error", {}).get("rms_velocity_m_s", math.inf), res.values())
+            seen[v_s] = fitted(v_s)
         return seen[v_s][0]
-    plain = identify(preps, rig.cylinder, rig.geometry, rig.P_atm, valve=rig.valve, gas=rig.gas)
-    rms0 = plain.details.get("velocity_error", {}).get("rms_velocity_m_s", math.inf)
+    rms0 = fitted(0.0)[0]
     zs = np.linspace(math.log10(lo), math.log10(hi), 6)
     costs = [misfit(z) for z in zs]
     i = int(np.argmin(costs))
@@ -239,53 +240,47 @@ def _fit_friction(name, fit_recs, hold_recs):
 
 def _cost(job) -> int:
     """A fit's rough cost, for scheduling: steep in its parameters (a grid, then a
-    simplex), times its laws; 1 for a job that is not a fit."""
-    if not isinstance(job[0], (str, list)):
-        return 1
+    simplex), times its laws."""
     names = job[0] if isinstance(job[0], list) else [job[0]]
     return sum(max(len(f) for f in FORMS.get(n, [CANDIDATES[n]])) ** 3 * len(FORMS.get(n, [None])) for n in names)
 
 
-def _map(fn, jobs, workers):
-    """``fn`` over ``jobs`` in ``workers`` processes, the costliest started first (so
-    that the two-parameter fit does not start last); results in the jobs' order."""
+def _map(fn, jobs, workers, cost=None):
+    """``fn`` over ``jobs`` in ``workers`` processes, the costliest by ``cost(job)``
+    (default: a candidate fit's, :func:`_cost`) started first (so that the
+    two-parameter fit does not start last); results in the jobs' order."""
     if workers > 1 and len(jobs) > 1:
-        order = sorted(range(len(jobs)), key=lambda i: -_cost(jobs[i]))
+        order = sorted(range(len(jobs)), key=lambda i: -(cost or _cost)(jobs[i]))
         with ProcessPoolExecutor(min(workers, len(jobs))) as pool:
             done = dict(zip(order, pool.map(fn, [jobs[i] for i in order])))
         return [done[i] for i in range(len(jobs))]
     return [fn(j) for j in jobs]
 
 
-def baseline_spread(values: dict, intervals: dict, recs, workers: int = 1) -> dict:
+def baseline_spread(values: dict, intervals: dict, recs, base, workers: int = 1) -> dict:
     """How far the baseline's own uncertainty moves its prediction of ``recs``: per
-    channel, the NRMSE between the model at ``values`` and at each identified parameter
-    moved to the nearer end of its 95 % interval (``intervals``: name -> (lo, hi)),
-    combined in quadrature.  A gap smaller than this is not beyond what the
-    identification already leaves open."""
+    channel, the NRMSE between the model at ``values`` (its runs ``base``, one per
+    recording) and at each identified parameter moved to the nearer end of its 95 %
+    interval (``intervals``: name -> (lo, hi)), combined in quadrature.  A gap smaller
+    than this is not beyond what the identification already leaves open."""
     names = [k for k, (lo, hi) in intervals.items()
              if k in values and math.isfinite(lo) and math.isfinite(hi) and hi > lo]
     if not names:
         return {c: 0.0 for c in CHANNELS}
-    jobs = [(values, k, intervals[k], recs) for k in names]
-    moved = _map(_moved_error, jobs, workers)
+    base = [{c: b[c].to_numpy() for c in CHANNELS} for b in base]
+    jobs = [(values, k, intervals[k], recs, base) for k in names]
+    moved = _map(_moved_error, jobs, workers, cost=lambda job: 1)
     return {c: float(math.sqrt(sum(m[c] ** 2 for m in moved))) for c in CHANNELS}
 
 
 def _moved_error(job) -> dict:
-    values, name, (lo, hi), recs = job
+    values, name, (lo, hi), recs, base = job
     v = values[name]
     step = min(abs(v - lo), abs(hi - v))
     other = dict(values, **{name: v + step if abs(hi - v) <= abs(v - lo) else v - step})
     if name == "F_s":
         other[name] = max(other[name], values.get("F_d", 0.0))
-    per = []
-    for r in recs:
-        a = _baseline(values, r, RTOL)
-        b = simulate_recording(other, r, rtol=RTOL)
-        span = recorded(r)
-        per.append({c: float(np.sqrt(np.mean((b[c].to_numpy() - a[c].to_numpy()) ** 2))
-                             / max(float(np.ptp(span[c])), 1e-12)) for c in CHANNELS})
+    per = [nrmse(simulate_recording(other, r, rtol=RTOL), r, against=b) for r, b in zip(recs, base)]
     return {c: float(np.mean([e[c] for e in per])) for c in CHANNELS}
 
 
@@ -296,10 +291,11 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     (name -> (lo, hi)), whose effect on the holdout raises the gap's threshold."""
     names = list(CANDIDATES) if names is None else names
     workers = workers or os.cpu_count() or 1
-    before = mean_errors(values, {}, hold_recs)
+    base = [_baseline(values, r, RTOL) for r in hold_recs]     # the baseline's runs, once
+    before = {c: float(np.mean([nrmse(b, r)[c] for b, r in zip(base, hold_recs)])) for c in CHANNELS}
     floors = [noise_floor(r) for r in hold_recs]
     noise = {c: float(np.mean([f[c] for f in floors])) for c in CHANNELS}
-    spread = baseline_spread(values, intervals or {}, hold_recs, workers)
+    spread = baseline_spread(values, intervals or {}, hold_recs, base, workers)
     threshold = NOISE_FACTOR * sum(noise.values()) + sum(spread.values()) + ABS_FLOOR
     gap = sum(before.values()) > threshold
     if not gap:        # nothing beyond the noise and the baseline's own uncertainty: no fit can show more

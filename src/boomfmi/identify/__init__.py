@@ -26,7 +26,7 @@ SSP_NAMES = {"K_v": "boom_load.K_v", "F_s": "boom_load.F_s", "F_d": "boom_load.F
 
 
 def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
-                        cutoff: float = CUTOFF, eq13: str = "printed", refine_all: bool = True):
+                        cutoff: float = CUTOFF, eq13: str = "printed"):
     """Read, validate and prepare the recordings, then identify; returns
     ``(FitResult, recordings, prepared)``."""
     if method not in ("fit", "paper"):
@@ -44,7 +44,7 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
     rig = rig_model(recs[0])
     preps = [prepare(r, cutoff, geometry=rig.geometry, P_atm=rig.P_atm) for r in recs]
     if method == "fit":
-        result = identify(preps, rig.cylinder, rig.geometry, P_atm=rig.P_atm, with_A_max=with_A_max, refine_all=refine_all,
+        result = identify(preps, rig.cylinder, P_atm=rig.P_atm, with_A_max=with_A_max,
                           valve=rig.valve, gas=rig.gas)
     else:
         result = identify_paper(preps, rig.cylinder, P_atm=rig.P_atm, eq13=eq13)
@@ -52,7 +52,7 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
     result.details["cutoff_Hz"] = cutoff
     _check_physical(result, paths)
     if method == "fit":
-        _check_time_scale(preps, rig, paths)
+        _check_time_scale(preps, rig, paths, result.params.get("A_max"))
     return result, recs, preps
 
 
@@ -61,13 +61,13 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
 FLOW_SCALE = 3.0
 
 
-def _check_time_scale(preps, rig, paths) -> None:
+def _check_time_scale(preps, rig, paths, a_max=None) -> None:
     """The chambers fill and empty at the rate the rig's valve allows (Eq. 1 and 7:
     the effective A_max from the mass balance, ``fit.fit_A_max``, within a factor
-    FLOW_SCALE of the rig's).  A recording whose time runs ten times slow, or whose
+    FLOW_SCALE of the rig's; ``a_max``: that estimate where identification made it).  A recording whose time runs ten times slow, or whose
     pressures are in the wrong unit, fails this where the load's equations alone would
     fit it with values no machine has but that look plausible one by one."""
-    a = fit_A_max(preps, rig.cylinder, rig.valve, rig.gas)
+    a = a_max or fit_A_max(preps, rig.cylinder, rig.valve, rig.gas)     # (identified already with --a-max)
     if a is None:
         return
     ratio = a.value / rig.valve.A_max

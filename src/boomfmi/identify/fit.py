@@ -122,7 +122,8 @@ class Modes:
     direction: np.ndarray
     impacts: np.ndarray
     v_min: float
-    v: np.ndarray = None       #: the smoothed velocity the classification used [m/s]
+    x: np.ndarray              #: the smoothed position the classification used [m]
+    v: np.ndarray              #: and its velocity [m/s]
 
 
 def motion_modes(p: Prepared, L: float) -> Modes:
@@ -132,13 +133,14 @@ def motion_modes(p: Prepared, L: float) -> Modes:
     sensor needs a larger speed to tell motion from rest."""
     xs = lowpass(p.x_raw, p.fs, MODE_CUTOFF)
     vs = np.gradient(xs, p.t)
-    v_min = max(0.002, 2.0 * resolution(p.x_raw) * MODE_CUTOFF)
+    q = resolution(p.x_raw)
+    v_min = max(0.002, 2.0 * q * MODE_CUTOFF)
     sliding = np.abs(vs) > v_min
     direction = np.sign(vs) * sliding
-    margin = max(3.0 * resolution(p.x_raw), 2e-4)
+    margin = max(3.0 * q, 2e-4)
     at_stop = (xs < margin) | (xs > L - margin)
     impacts = np.flatnonzero(at_stop[1:] & ~at_stop[:-1] & sliding[:-1]) + 1
-    return Modes(sliding, direction, impacts, v_min, vs)
+    return Modes(sliding, direction, impacts, v_min, xs, vs)
 
 
 #: Cut-off [Hz] of the state-variable filter of the equation error.
@@ -147,15 +149,14 @@ EE_CUTOFF = 10.0
 REACH = 3.0
 
 
-def correlation_samples(p: Prepared, cutoff: float | None = None) -> float:
+def correlation_samples(p: Prepared) -> float:
     """Samples over which the residuals of filtered data stay correlated: about one
     period of the low-pass filter's cut-off, fs / (2 cutoff) (20 at 1 kHz and 25 Hz).
     Interval widths from least squares are scaled by its square root."""
-    return max(1.0, p.fs / (2.0 * (cutoff or p.cutoff)))
+    return max(1.0, p.fs / (2.0 * p.cutoff))
 
 
-def equation_rows(p: Prepared, cyl: ph.Cylinder, P_atm: float, L: float, cutoff: float = EE_CUTOFF,
-                  v_s: float = 0.0):
+def equation_rows(r: "Motion", cutoff: float = EE_CUTOFF, v_s: float = 0.0):
     """Eq. 8 over the whole recording, through a state-variable filter G (zero-phase
     low-pass at ``cutoff``), as rows ``X theta = y`` in theta = (M, K_v, F_d, F_L)::
 
@@ -171,20 +172,19 @@ def equation_rows(p: Prepared, cyl: ph.Cylinder, P_atm: float, L: float, cutoff:
     w = exp(-|v| / v_s) at the measured speed, and theta gains F_s (a fifth column).  Samples within the filter's
     reach of the recording's ends or of an impact on a stop are left out (a stop's
     impulse is not in Eq. 8).  Returns ``(X, y, mask)``."""
-    modes = motion_modes(p, L)
+    p, modes = r.p, r.modes
     s = modes.sliding.astype(float)
     G = lambda y: lowpass(y, p.fs, cutoff)
     xg = G(p.x_raw)
     vg = np.gradient(xg, p.t)
     ag = np.gradient(vg, p.t)
-    F_p = ph.piston_force(p.p_a_raw, p.p_b_raw, cyl, P_atm)
     friction = modes.direction * np.cos(p.phi)
     if v_s > 0.0:
         w = fx.stribeck_weight(modes.v, v_s)
         X = np.column_stack([ag, vg, G(friction * (1.0 - w)), G(s * np.sin(p.phi)), G(friction * w)])
     else:
         X = np.column_stack([ag, vg, G(friction), G(s * np.sin(p.phi))])
-    y = G(s * F_p)
+    y = G(s * r.F_p)
     reach = int(REACH * p.fs / cutoff)
     use = np.ones(len(y), bool)
     use[:reach] = use[-reach:] = False
@@ -193,15 +193,14 @@ def equation_rows(p: Prepared, cyl: ph.Cylinder, P_atm: float, L: float, cutoff:
     return X, y, use
 
 
-def equation_error(preps: list[Prepared], cyl: ph.Cylinder, P_atm: float, L: float,
-                   n_boot: int = 200, block: float = 0.1, seed: int = 0, cutoff: float = EE_CUTOFF,
-                   v_s: float = 0.0):
+def equation_error(motions: list["Motion"], n_boot: int = 200, block: float = 0.1, seed: int = 0,
+                   cutoff: float = EE_CUTOFF, v_s: float = 0.0):
     """Stage 1: M, K_v, F_d, F_L (and F_s, with a Stribeck velocity ``v_s``) by least
     squares on :func:`equation_rows` of every recording; 95 % intervals from a
     moving-block bootstrap of the rows."""
     X, y = [], []
-    for p in preps:
-        Xi, yi, use = equation_rows(p, cyl, P_atm, L, cutoff, v_s)
+    for r in motions:
+        Xi, yi, use = equation_rows(r, cutoff, v_s)
         X.append(Xi[use])
         y.append(yi[use])
     X, y = np.vstack(X), np.concatenate(y)
@@ -213,7 +212,7 @@ def equation_error(preps: list[Prepared], cyl: ph.Cylinder, P_atm: float, L: flo
     theta /= scale
     cond = float(np.linalg.cond(X / scale))
     rng = np.random.default_rng(seed)
-    fs = preps[0].fs
+    fs = motions[0].p.fs
     b = max(1, int(block * fs))
     n = len(y)
     starts = np.arange(0, max(1, n - b))
@@ -244,28 +243,28 @@ VE_CUTOFF = 30.0
 
 
 @dataclass
-class _Runs:
-    """One recording's sliding runs, ready for stage 2 and 3."""
+class Motion:
+    """One prepared recording as every stage reads it, built once (:func:`motion`)."""
     p: Prepared
     modes: Modes
-    spans: list            #: (first, end, direction) of each run long enough to use
+    spans: list            #: (first, end, direction) of each sliding run long enough to use
     F_p: np.ndarray        #: the pneumatic force [N] at each sample
     v_meas: np.ndarray     #: the measured velocity, low-passed [m/s]
-    v_start: np.ndarray    #: the measured velocity, smoothed for start values [m/s]
-    reach: int             #: samples at each run's ends left out of the comparison
+    reach: int             #: samples at each run's ends left out of the velocity comparison
+    L: float               #: the stroke [m]
 
 
-def _sliding_runs(p: Prepared, cyl: ph.Cylinder, P_atm: float, L: float) -> _Runs:
-    modes = motion_modes(p, L)
+def motion(p: Prepared, cyl: ph.Cylinder, P_atm: float) -> Motion:
+    """Classify ``p``'s samples and cut its sliding runs (one direction each)."""
+    modes = motion_modes(p, cyl.L)
     reach = int(round(p.fs / VE_CUTOFF))
     spans = [(i0, i1, d) for d in (1.0, -1.0) for i0, i1 in runs(modes.direction == d) if i1 - i0 > 3 * reach]
     spans.sort()
-    xs = lowpass(p.x_raw, p.fs, MODE_CUTOFF)
-    return _Runs(p, modes, spans, ph.piston_force(p.p_a_raw, p.p_b_raw, cyl, P_atm),
-                 lowpass(np.gradient(p.x_raw, p.t), p.fs, VE_CUTOFF), np.gradient(xs, p.t), reach)
+    return Motion(p, modes, spans, ph.piston_force(p.p_a_raw, p.p_b_raw, cyl, P_atm),
+                  lowpass(np.gradient(p.x_raw, p.t), p.fs, VE_CUTOFF), reach, cyl.L)
 
 
-def _net_force(r: _Runs, i0: int, i1: int, d: float, F_d: float, F_L: float,
+def _net_force(r: Motion, i0: int, i1: int, d: float, F_d: float, F_L: float,
                F_s: float = 0.0, v_s: float = 0.0) -> np.ndarray:
     """The force that drives a run, each sample's value the mean of it and the next
     (the force held over a sample interval, centred: a held sample would lag it).
@@ -282,25 +281,23 @@ def _net_force(r: _Runs, i0: int, i1: int, d: float, F_d: float, F_L: float,
     return np.concatenate((0.5 * (F[:-1] + F[1:]), F[-1:]))
 
 
-def _run_velocity(r: _Runs, theta, v_s: float = 0.0) -> np.ndarray:
+def _run_velocity(r: Motion, theta, v_s: float = 0.0) -> np.ndarray:
     """Stage 2's simulated velocity over every run of one recording (0 elsewhere);
     theta = (M, K_v, F_d, F_L[, F_s])."""
     M, K_v, F_d, F_L = theta[:4]
     F_s = theta[4] if len(theta) > 4 else 0.0
     v = np.zeros(len(r.p.t))
     for i0, i1, d in r.spans:
-        v[i0:i1] = ph.sliding_velocity(r.v_start[i0], _net_force(r, i0, i1, d, F_d, F_L, F_s, v_s),
+        v[i0:i1] = ph.sliding_velocity(r.modes.v[i0], _net_force(r, i0, i1, d, F_d, F_L, F_s, v_s),
                                        K_v, M, r.p.dt)
     return v
 
 
-def velocity_error(preps: list[Prepared], start: dict, cyl: ph.Cylinder, P_atm: float, L: float,
-                   n_boot: int = 300, seed: int = 0, v_s: float = 0.0):
+def velocity_error(all_runs: list[Motion], start: dict, n_boot: int = 300, seed: int = 0, v_s: float = 0.0):
     """Stage 2: M, K_v, F_d, F_L (and F_s, with a Stribeck velocity ``v_s``) by velocity
     output error over every sliding run, from ``start`` (stage 1); intervals from a
     bootstrap over the runs of the linearised fit.  Returns ``(estimates, details)``
     or ``(None, details)`` without usable runs."""
-    all_runs = [_sliding_runs(p, cyl, P_atm, L) for p in preps]
     names = ("M", "K_v", "F_d", "F_L")
     held = (start["F_s"],) if v_s > 0.0 else ()     # the Stribeck curve's static end, from the starts
     theta0 = np.array([start[k] for k in names])
@@ -362,9 +359,6 @@ REST_BEFORE = 0.03
 SETTLE = 0.02
 START_BACK = 0.15
 START_AFTER = 0.06
-#: A start informs F_s only if the drive force stays below the static level for at
-#: least this many samples of the search window (else it jumped through it).
-INFORMATIVE_SAMPLES = 3
 #: Rests this close [m] to a stop do not bound F_s; F_s is looked for up to GRID_TOP F_d.
 STOP_ZONE = 1e-3
 GRID_TOP = 4.0
@@ -380,7 +374,7 @@ STRAY = 0.05     #: probability that a start is not what the model makes of it
 IDENTIFIED_WIDTH = 0.10
 
 
-def _starts(r: _Runs, L: float):
+def _starts(r: Motion):
     """Runs of ``r`` that follow a rest: (first sample of the search window, run start,
     end of the comparison window, direction, run end).  The rest counts from SETTLE
     after the motion before it fell below the threshold speed (the piston is still
@@ -397,7 +391,7 @@ def _starts(r: _Runs, L: float):
     return out
 
 
-def static_friction(preps: list[Prepared], base: dict, cyl: ph.Cylinder, P_atm: float, L: float,
+def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: float,
                     n_grid: int = 400, v_s: float = 0.0):
     """Stage 3: F_s from every start (see the module's docstring).  With a Stribeck
     velocity ``v_s`` > 0 the friction after a start falls from F_s towards F_d along
@@ -405,8 +399,8 @@ def static_friction(preps: list[Prepared], base: dict, cyl: ph.Cylinder, P_atm: 
     its own.  Returns ``(Estimate or None, identified, details)``."""
     M, K_v, F_d, F_L = (base[k] for k in ("M", "K_v", "F_d", "F_L"))
     events, lower = [], 0.0
-    for p in preps:
-        r = _sliding_runs(p, cyl, P_atm, L)
+    for r in motions:
+        p = r.p
         # the static level the drive force needs at each sample, in the run's direction
         # (from the filtered pressures: the running maximum below would pick the
         # noise's peaks and see every start early)
@@ -416,18 +410,16 @@ def static_friction(preps: list[Prepared], base: dict, cyl: ph.Cylinder, P_atm: 
         # samples before a start): a lower bound of F_s
         # (a rest within STOP_ZONE of the stops, or of the extremes the recording
         # reaches, may be a stop's: its reading carries the sensor's offset there)
-        xs = lowpass(p.x_raw, p.fs, MODE_CUTOFF)
-        low, high = max(0.0, float(xs.min())) + STOP_ZONE, min(L, float(xs.max())) - STOP_ZONE
+        xs = r.modes.x
+        low, high = max(0.0, float(xs.min())) + STOP_ZONE, min(r.L, float(xs.max())) - STOP_ZONE
         held = ~_dilate(r.modes.sliding, int(START_BACK * p.fs)) & (xs > low) & (xs < high)
         edge = int(0.1 * p.fs)          # the filter's reach at the recording's ends
         held[:edge] = held[-edge:] = False
         if held.any():
             smooth = median_filter(level, size=int(0.02 * p.fs) | 1, mode="nearest")   # local: no reach into a start
             lower = max(lower, float(np.max(np.abs(smooth[held]))))
-        for j, i0, ie, d, i1 in _starts(r, L):
+        for j, i0, ie, d, i1 in _starts(r):
             need = d * level[j:ie]
-            if i0 - j < INFORMATIVE_SAMPLES:
-                continue
             rest = p.x_raw[j:max(j + 1, i0 - int(0.01 * p.fs))]
             q = _quantum(p.x_raw[j:min(len(p.x_raw), ie + int(0.05 * p.fs))])
             events.append(dict(need=need, n=ie - j, r=r, j=j, ie=ie, d=d, t=float(p.t[i0]),
@@ -595,32 +587,31 @@ def fit_A_max(preps: list[Prepared], cyl: ph.Cylinder, valve: ph.Valve, gas: ph.
     return Estimate(A, (A - 1.96 * se, A + 1.96 * se), "m2")
 
 
-def identify(preps: list[Prepared], cyl: ph.Cylinder = ph.Cylinder(), geom: ph.Geometry = ph.Geometry(),
-             P_atm: float = reference_rig.P_atm, refine_all: bool = True, with_A_max: bool = False,
-             valve: ph.Valve = ph.Valve(), gas: ph.Gas = ph.Gas(), v_s: float = 0.0) -> FitResult:
-    """The sound method on prepared recordings; see the module's docstring.
-    ``refine_all=False`` stops after stage 1 (and F_s).  ``v_s`` > 0 [m/s]: the load
+def identify(preps: list[Prepared], cyl: ph.Cylinder = ph.Cylinder(), P_atm: float = reference_rig.P_atm,
+             with_A_max: bool = False, valve: ph.Valve = ph.Valve(), gas: ph.Gas = ph.Gas(),
+             v_s: float = 0.0) -> FitResult:
+    """The sound method on prepared recordings (prepared at their rig's geometry: phi
+    comes with them); see the module's docstring.  ``v_s`` > 0 [m/s]: the load
     with stribeck_friction at that Stribeck velocity (every stage with the Stribeck
     curve; F_s from the starts before and after stage 2)."""
-    L = cyl.L
-    est, info = equation_error(preps, cyl, P_atm, L, v_s=v_s)
+    motions = [motion(p, cyl, P_atm) for p in preps]       # classified once, read by every stage
+    est, info = equation_error(motions, v_s=v_s)
     details = {"equation_error": info}
     warnings = []
     values = lambda: {k: e.value for k, e in est.items()}
     if v_s > 0.0:        # F_s from the starts first: the sliding alone hardly holds it
-        F_s, identified, info3 = static_friction(preps, values(), cyl, P_atm, L, v_s=v_s)
+        F_s, identified, info3 = static_friction(motions, values(), cyl, P_atm, v_s=v_s)
         if F_s is not None:
             est["F_s"] = F_s
         else:
             est["F_s"] = Estimate(max(est["F_d"].value, est.get("F_s", est["F_d"]).value), (math.nan, math.nan), "N")
-    if refine_all:
-        refined, info2 = velocity_error(preps, values(), cyl, P_atm, L, v_s=v_s)
-        details["velocity_error"] = info2
-        if refined is None:
-            warnings.append("too few runs of motion for the velocity fit: the load is from the equation error alone")
-        else:
-            est.update(refined)
-    F_s, identified, info3 = static_friction(preps, values(), cyl, P_atm, L, v_s=v_s)
+    refined, info2 = velocity_error(motions, values(), v_s=v_s)
+    details["velocity_error"] = info2
+    if refined is None:
+        warnings.append("too few runs of motion for the velocity fit: the load is from the equation error alone")
+    else:
+        est.update(refined)
+    F_s, identified, info3 = static_friction(motions, values(), cyl, P_atm, v_s=v_s)
     details["static_friction"] = dict(info3, identified=bool(identified))
     if F_s is None:
         warnings.append("no start of motion from rest: F_s cannot be identified; F_d is used in its place")

@@ -20,6 +20,10 @@ def sqrt(x):
     return math.sqrt(x) if type(x) in _SCALARS else np.sqrt(x)
 
 
+def exp(x):
+    return math.exp(x) if type(x) in _SCALARS else np.exp(x)
+
+
 def cos(x):
     return math.cos(x) if type(x) in _SCALARS else np.cos(x)
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 
+from . import _xp as xp
 from .lag import first_order_step
 from .orifice import signed_mass_flow, signed_mass_flow_slope
 from .params import Gas, Load
@@ -110,10 +111,7 @@ def leakage_orifice_slopes(p_a: float, p_b: float, A: float, gas: Gas = Gas()) -
 def stribeck_weight(v, v_s: float):
     """The static level's share w of the Stribeck friction at speed ``v`` [m/s] (float
     or array): the Coulomb level is ``F_d (1 - w) + F_s w``, ``w = exp(-|v| / v_s)``."""
-    if type(v) in (float, int):
-        return math.exp(-abs(v) / v_s)
-    import numpy as np
-    return np.exp(-np.abs(v) / v_s)
+    return xp.exp(-xp.abs_(v) / v_s)
 
 
 def stribeck_load(load: Load, v: float, v_s: float) -> Load:

@@ -8,6 +8,8 @@ from __future__ import annotations
 import bisect
 import math
 
+import numpy as np
+
 
 def first_order_step(y: float, target: float, dt: float, tau: float) -> float:
     """``y`` after ``dt`` [s] of ``y' = (target - y) / tau`` with ``target`` held: exact,
@@ -55,7 +57,6 @@ class DelayLine:
 def delayed(y, t, delay: float):
     """The signal ``y`` (a NumPy array on times ``t`` [s]) ``delay`` [s] late: y(t -
     delay), linear between samples, the first value before the signal starts."""
-    import numpy as np
     if delay <= 0.0:
         return y
     return np.interp(np.asarray(t, float) - delay, t, y)

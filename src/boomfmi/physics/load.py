@@ -102,7 +102,7 @@ def sliding_velocity(v0, F_net, K_v: float, M: float, dt: float):
         v[k+1] = e v[k] + (1 - e) F_net[k] / K_v,   e = exp(-K_v dt / M)
 
     ``F_net`` may be 2-D: one force history per row (``v0`` a scalar or one per row)."""
-    from scipy.signal import lfilter
+    from scipy.signal import lfilter      # here, not at the top: the FMUs bundle this module without scipy
     e = math.exp(-K_v * dt / M)
     F_net = np.asarray(F_net, dtype=float)
     zi = np.broadcast_to(np.asarray(v0, dtype=float), F_net.shape[:-1])[..., None].copy()
