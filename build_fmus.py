@@ -1,10 +1,12 @@
 #!/usr/bin/env python3
 """Build every boomfmi FMU into build/fmus/ and pack the SSP systems into build/*.ssp.
 
-    python build_fmus.py [--out build] [NAME ...]
+    python build_fmus.py [--out build] [--fmi 2|3] [NAME ...]
 
 Each FMU is self-contained (its physics bundled under a private name), carries SI
 units, bounds and output dependencies, and passes fmpy.validation.validate_fmu.
+``--fmi 3`` builds the FMI 3.0 versions of the four model FMUs (pythonfmu3, from the
+same adapters) into build/fmi3/ instead; the SSPs stay FMI 2.0.
 """
 from __future__ import annotations
 
@@ -28,7 +30,12 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, default=HERE / "build", help="output folder (default: build/)")
     parser.add_argument("--write-references", action="store_true",
                         help="also rewrite fmus/<name>/<name>_in.csv and _ref.csv from the built FMUs")
+    parser.add_argument("--fmi", choices=("2", "3"), default="2",
+                        help="FMI version: 2 (default) into <out>/fmus/ with the SSPs; "
+                             "3: the model FMUs into <out>/fmi3/")
     args = parser.parse_args(argv)
+    if args.fmi == "3":
+        return build_fmi3(parser, args)
     unknown = sorted(set(args.names) - set(FMU_NAMES))
     if unknown:
         parser.error(f"unknown FMU(s): {', '.join(unknown)}; known: {', '.join(FMU_NAMES)}")
@@ -53,6 +60,28 @@ def main(argv=None) -> int:
                 print(f"not packed {args.out / f'{name}.ssp'}: {', '.join(missing)} not built yet")
                 continue
             print(f"packed {pack_ssp(HERE / 'ssp' / ssd, args.out / 'fmus', args.out / f'{name}.ssp')}")
+    except BuildError as e:
+        print(f"build_fmus.py: {e}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def build_fmi3(parser, args) -> int:
+    """``--fmi 3``: the FMI 3.0 model FMUs into <out>/fmi3/ (one shim compiled for all)."""
+    import tempfile
+
+    from boomfmi.fmubuild.fmi3 import FMI3_NAMES, build_fmu3, compile_shim3
+    names = list(FMI3_NAMES) if args.names is parser.get_default("names") else args.names
+    unknown = sorted(set(names) - set(FMI3_NAMES))
+    if unknown:
+        parser.error(f"no FMI 3.0 version of: {', '.join(unknown)}; FMI 3.0: {', '.join(FMI3_NAMES)}")
+    if args.write_references:
+        parser.error("--write-references: the references are written from the FMI 2.0 FMUs")
+    try:
+        with tempfile.TemporaryDirectory(prefix="boomfmi_fmi3_shim_") as tmp:
+            shim = compile_shim3(Path(tmp) / "shim3.so")
+            for name in names:
+                print(f"built {build_fmu3(HERE / 'fmus' / name, args.out / 'fmi3', shim)}")
     except BuildError as e:
         print(f"build_fmus.py: {e}", file=sys.stderr)
         return 1

@@ -2,6 +2,7 @@
 # Create .venv (Python 3.11) with boomfmi and its test dependencies, install the virtual
 # view's browser libraries (three.js, uPlot) with npm, and build the FMUs.  With
 # --browser, also Debian's chromium and chromium-driver for the view's browser test.
+# As root with apt-get, also Debian's mingw-w64 for the FMUs' win64 status shim.
 # Idempotent: reinstalls only when pyproject.toml or the lock file changed;
 # build_fmus.py always runs (a few seconds) so the FMUs match the sources.
 set -euo pipefail
@@ -47,6 +48,22 @@ if [ "${1:-}" = "--browser" ] && ! { command -v chromium && command -v chromedri
     else
         echo "bootstrap: chromium and chromedriver are missing and cannot be installed here (needs root" \
              "and apt-get); the view's browser test will be skipped" >&2
+    fi
+fi
+
+# mingw-w64 cross-compiles the FMUs' win64 status shim; without it they ship pythonfmu's
+# own win64 binary (Python hosts only) and the build says so.
+if ! command -v x86_64-w64-mingw32-gcc >/dev/null 2>&1; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+        echo "bootstrap: installing Debian's gcc-mingw-w64-x86-64 (the FMUs' win64 status shim)"
+        export DEBIAN_FRONTEND=noninteractive
+        apt-get install -y -qq gcc-mingw-w64-x86-64 >/dev/null 2>&1 ||
+            { apt-get update -qq && apt-get install -y -qq gcc-mingw-w64-x86-64 >/dev/null; } ||
+            echo "bootstrap: could not install gcc-mingw-w64-x86-64; the FMUs' win64 binary stays" \
+                 "pythonfmu's own" >&2
+    else
+        echo "bootstrap: x86_64-w64-mingw32-gcc is missing and cannot be installed here (needs root" \
+             "and apt-get); the FMUs' win64 binary stays pythonfmu's own" >&2
     fi
 fi
 

@@ -1,4 +1,4 @@
-"""boom_load: the boom's load, friction and end stops as an FMI 2.0 co-simulation FMU.
+"""boom_load: the boom's load, friction and end stops as an FMI 2.0 (and 3.0) co-simulation FMU.
 
 Inputs the absolute chamber pressures and an external force along the cylinder axis;
 outputs the piston's position and velocity (its states), the boom angle alpha and the
@@ -10,7 +10,9 @@ Unmodelled effect, off by default (``model/catalogue.py``, form in ``physics/eff
 Coulomb friction fall from F_s to F_d as speed rises (stribeck_friction).  The end
 cushioning acts on the exhaust air, so it is the cylinder's option.
 """
-from boomfmi_boom_load_lib.fmislave import (GEOMETRY, LOAD, BoomSlave, effect_options, input,
+import math
+
+from boomfmi_boom_load_lib.fmislave import (GEOMETRY, L_MAX, LOAD, BoomSlave, effect_options, input,
                                            option_values, output, parameter, rig_parameters)
 from boomfmi_boom_load_lib.model import Boom, Model, effects_from_options
 from boomfmi_boom_load_lib.physics import (Cylinder, Geometry, Load, ParameterError, alpha_from_x,
@@ -25,12 +27,13 @@ class BoomLoad(BoomSlave):
         input("p_a", reference_rig.P_atm, "Pa", "absolute pressure in chamber A (cap side)", min=0.0),
         input("p_b", reference_rig.P_atm, "Pa", "absolute pressure in chamber B (rod side)", min=0.0),
         input("f_ext", 0.0, "N", "external force on the piston along the cylinder axis, positive against extension"),
-        output("x", 0.0, "m", "piston position, 0 = fully retracted", min=0.0),
+        output("x", 0.0, "m", "piston position, 0 = fully retracted; within the stroke [0, L]", min=0.0, max=L_MAX),
         output("v", 0.0, "m/s", "piston velocity, positive extending"),
-        output("alpha", 0.0, "rad", "boom angle (Eq. 12)"),
-        output("phi", 0.0, "rad", "angle between the cylinder axis and the horizontal (Eq. 10)"),
+        output("alpha", 0.0, "rad", "boom angle (Eq. 12), an angle of the triangle a, b, l", min=0.0, max=math.pi),
+        output("phi", 0.0, "rad", "angle between the cylinder axis and the horizontal (Eq. 10)",
+               min=-0.5 * math.pi, max=math.pi),
         *rig_parameters(*LOAD, *GEOMETRY, "A_a", "A_b", "P_atm"),
-        parameter("x0", 0.0, "m", "initial piston position", min=0.0),
+        parameter("x0", 0.0, "m", "initial piston position, within the stroke [0, L]", min=0.0, max=L_MAX),
         *effect_options("boom_load"),
     )
 

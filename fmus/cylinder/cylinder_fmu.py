@@ -1,4 +1,4 @@
-"""cylinder: the chambers of the DSNU 32-60 cylinder as an FMI 2.0 co-simulation FMU.
+"""cylinder: the chambers of the DSNU 32-60 cylinder as an FMI 2.0 (and 3.0) co-simulation FMU.
 
 Inputs the mass flows into each chamber and the piston's position and velocity;
 outputs the absolute chamber pressures, its states (Eq. 5 to 7).  Within a
@@ -17,8 +17,8 @@ m c_v / (h_wall A_wall) (heat_transfer); ``l_cushion`` > 0 makes a chamber's out
 within that distance of its end of stroke also pass the cushion needle of area
 ``A_cushion`` to the exhaust (end_cushioning; DSNU-PPVA).
 """
-from boomfmi_cylinder_lib.fmislave import (CYLINDER, BoomSlave, effect_options, input, option_values,
-                                          output, parameter, rig_parameters)
+from boomfmi_cylinder_lib.fmislave import (CYLINDER, L_MAX, P_S_MAX, BoomSlave, effect_options, input,
+                                          option_values, output, parameter, rig_parameters)
 from boomfmi_cylinder_lib.model import Boom, Model, effects_from_options
 from boomfmi_cylinder_lib.physics import (Cylinder as CylinderParams, Gas, ParameterError,
                                           Valve, check_cylinder, check_gas)
@@ -30,7 +30,7 @@ class Cylinder(BoomSlave):
     variables = (
         input("mdot_a", 0.0, "kg/s", "mass flow into chamber A"),
         input("mdot_b", 0.0, "kg/s", "mass flow into chamber B"),
-        input("x", 0.0, "m", "piston position, 0 = fully retracted", min=0.0),
+        input("x", 0.0, "m", "piston position, 0 = fully retracted (held within the stroke [0, L])", min=0.0, max=L_MAX),
         input("v", 0.0, "m/s", "piston velocity, positive extending"),
         input("dmdot_a_dp_a", 0.0, "kg/(s.Pa)", "slope of mdot_a with respect to p_a; 0 holds mdot_a over the step", max=0.0),
         input("dmdot_b_dp_b", 0.0, "kg/(s.Pa)", "slope of mdot_b with respect to p_b; 0 holds mdot_b over the step", max=0.0),
@@ -40,7 +40,8 @@ class Cylinder(BoomSlave):
         parameter("p_a0", reference_rig.P_atm, "Pa", "initial absolute pressure in chamber A", min=0.0),
         parameter("p_b0", reference_rig.P_atm, "Pa", "initial absolute pressure in chamber B", min=0.0),
         *effect_options("cylinder"),
-        parameter("P_e", reference_rig.P_e, "Pa", "exhaust pressure behind the cushion needle (end_cushioning), absolute", min=0.0),
+        parameter("P_e", reference_rig.P_e, "Pa", "exhaust pressure behind the cushion needle (end_cushioning), absolute",
+                  min=0.0, max=P_S_MAX),
     )
 
     def __init__(self, **kwargs):

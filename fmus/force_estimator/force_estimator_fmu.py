@@ -22,7 +22,7 @@ inputs held over it (no direct feedthrough, so no algebraic loop in any coupling
 """
 import math
 
-from boomfmi_force_estimator_lib.fmislave import (CYLINDER, GEOMETRY, LOAD,
+from boomfmi_force_estimator_lib.fmislave import (CYLINDER, GEOMETRY, L_MAX, LOAD,
                                                   BoomSlave, input, output, parameter, rig_parameters)
 from boomfmi_force_estimator_lib.physics import (Cylinder, Gas, Geometry, Load, ParameterError, below_sensor_floor,
                                                  check_cylinder, check_gas, check_geometry, check_load,
@@ -38,7 +38,7 @@ METHODS = ("position_error", "observer")
 class ForceEstimator(BoomSlave):
     description = "External force estimation (the paper's position error, or a load observer) and joystick force reflection"
     variables = (
-        input("x_model", 0.0, "m", "position_error: piston position of the model"),
+        input("x_model", 0.0, "m", "position_error: piston position of the model, within its stroke [0, L]", min=0.0, max=L_MAX),
         input("v_model", 0.0, "m/s", "position_error: piston velocity of the model"),
         input("p_a_model", reference_rig.P_atm, "Pa", "absolute chamber A pressure of the model (position_error: its stiffness; observer: below the sensor's floor)", min=0.0),
         input("p_b_model", reference_rig.P_atm, "Pa", "absolute chamber B pressure of the model (position_error: its stiffness; observer: below the sensor's floor)", min=0.0),

@@ -32,8 +32,8 @@ so x) through a first-order lag, the sensors and their conditioning, and
 import bisect
 import time
 
-from boomfmi_hardware_bridge_lib.fmislave import (GEOMETRY, BoomSlave, effect_options, input, output, parameter,
-                                                 rig_parameters)
+from boomfmi_hardware_bridge_lib.fmislave import (GEOMETRY, U_MAX, U_MIN, BoomSlave, effect_options, input, output,
+                                                 parameter, rig_parameters)
 from boomfmi_hardware_bridge_lib.link.client import RigClient, parse_address, wait_until
 from boomfmi_hardware_bridge_lib.link.protocol import LinkError, load_key
 from boomfmi_hardware_bridge_lib.physics import Geometry, ParameterError, check_geometry, x_from_alpha
@@ -48,12 +48,13 @@ MEASURED = ("p_a", "p_b", "alpha", "f_ext")
 class HardwareBridge(BoomSlave):
     description = "The rig through its DAQ: commands out, measurements in (replay a recording or talk UDP to a rig)"
     variables = (
-        input("u", reference_rig.u_centre, "V", "valve command to send to the rig", min=0.0, max=10.0),
+        input("u", reference_rig.u_centre, "V", "valve command to send to the rig", min=U_MIN, max=U_MAX),
         output("p_a", 0.0, "Pa", "measured chamber A pressure, gauge (as recorded)"),
         output("p_b", 0.0, "Pa", "measured chamber B pressure, gauge (as recorded)"),
         output("alpha", 0.0, "rad", "measured boom angle"),
         output("x", 0.0, "m", "piston position from the measured alpha by Eq. 12"),
-        output("u_applied", reference_rig.u_centre, "V", "command the valve got over the last step (5 V while the rig is in fail-safe)"),
+        output("u_applied", reference_rig.u_centre, "V", "command the valve got over the last step (5 V while the rig is in fail-safe)",
+               min=U_MIN, max=U_MAX),
         output("f_ext", 0.0, "N", "true external force on the piston where the rig knows it (virtual rig, load cell), else 0"),
         output("t_rig", 0.0, "s", "the rig's time of the current sample"),
         output("link_ok", True, "1", "the current sample is fresh (false: held after a lost answer, or outside the recording)", type="Boolean"),

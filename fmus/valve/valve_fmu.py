@@ -1,4 +1,4 @@
-"""valve: the proportional valve MPYE-5-1/4-010B as an FMI 2.0 co-simulation FMU.
+"""valve: the proportional valve MPYE-5-1/4-010B as an FMI 2.0 (and 3.0) co-simulation FMU.
 
 Inputs u [V] and the absolute chamber pressures; outputs the mass flows into each
 chamber through the ports that the command opens (Eq. 1, standard form, and the
@@ -12,8 +12,8 @@ spool follow the command with a first-order lag (valve_dynamics; the spool posit
 then the FMU's state), ``deadband`` > 0 closes a band of commands around 5 V
 (valve_deadband).
 """
-from boomfmi_valve_lib.fmislave import (BoomSlave, effect_options, input, option_values, output, parameter,
-                                       rig_parameters)
+from boomfmi_valve_lib.fmislave import (U_MAX, U_MIN, BoomSlave, effect_options, input, option_values, output,
+                                       parameter, rig_parameters)
 from boomfmi_valve_lib.model import Boom, Model, effects_from_options
 from boomfmi_valve_lib.physics import Gas, Valve as ValveParams, check_gas, check_valve
 from boomfmi_valve_lib.physics import reference_rig
@@ -22,7 +22,7 @@ from boomfmi_valve_lib.physics import reference_rig
 class Valve(BoomSlave):
     description = "Proportional 5/3 valve: orifice mass flows into chambers A and B (paper Eq. 1)"
     variables = (
-        input("u", reference_rig.u_centre, "V", "valve command; 5 V closes every port, below 5 V supply -> A (extend), above 5 V supply -> B (retract)", min=0.0, max=10.0),
+        input("u", reference_rig.u_centre, "V", "valve command; 5 V closes every port, below 5 V supply -> A (extend), above 5 V supply -> B (retract)", min=U_MIN, max=U_MAX),
         input("p_a", reference_rig.P_atm, "Pa", "absolute pressure in chamber A (cap side)", min=0.0),
         input("p_b", reference_rig.P_atm, "Pa", "absolute pressure in chamber B (rod side)", min=0.0),
         output("mdot_a", 0.0, "kg/s", "mass flow into chamber A (negative when A exhausts)", depends=("u", "p_a", "p_b")),
@@ -57,8 +57,8 @@ class Valve(BoomSlave):
         u = self._boom.opening(self._spool if self.tau_spool > 0.0 else self.u)
         key = (u, self.p_a, self.p_b)
         if key != self._key:
-            if not (self.p_a > 0.0 and self.p_b > 0.0):
-                self.fail(f"input pressures must be > 0 Pa absolute, got p_a = {self.p_a!r}, p_b = {self.p_b!r}")
+            if not (self.p_a >= 0.0 and self.p_b >= 0.0):
+                self.fail(f"input pressures must be >= 0 Pa absolute, got p_a = {self.p_a!r}, p_b = {self.p_b!r}")
                 self._flows = (0.0, 0.0, 0.0, 0.0)
             else:
                 self._flows = self._boom.valve_flows(u, self.p_a, self.p_b)

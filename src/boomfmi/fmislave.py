@@ -1,15 +1,22 @@
-"""The thin base class of every boomfmi FMU, on top of pythonfmu's ``Fmi2Slave``.
+"""The thin base class of every boomfmi FMU, on top of pythonfmu's ``Fmi2Slave`` or
+pythonfmu3's ``Fmi3Slave``.
 
 An FMU declares its variables once, as a table of :class:`Variable` (name, causality,
 SI unit, description, start, min, max, and for outputs the inputs that feed through);
 this class registers them with pythonfmu, and ``boomfmi.fmubuild`` writes the same
 table's units, bounds and dependencies into ``modelDescription.xml``.
 
+The same adapter (``fmus/<name>/<name>_fmu.py``) makes the FMI 2.0 and the FMI 3.0 FMU:
+this module targets FMI 2.0 (pythonfmu) unless the package it is bundled in sets
+``FMI_VERSION = 3`` in its ``__init__`` (as ``boomfmi.fmubuild.fmi3`` does), and then
+pythonfmu3.  Only this module knows the difference.
+
 Errors are reported the FMI way rather than by raising: a bad parameter or a failed
 step is logged with status ``fmi2Error`` (naming the parameter) and the call returns
-that status through the FMU's status shim (see ``boomfmi/fmubuild/status_shim.c``).
-pythonfmu itself turns any Python exception into ``fmi2Fatal`` and frees the instance's
-Python object, which leaves the host nothing to recover.
+that status through the FMU's status shim (see ``boomfmi/fmubuild/status_shim.c``;
+for FMI 3.0 the shim of ``boomfmi/fmubuild/fmi3.py``).  pythonfmu and pythonfmu3 turn
+any Python exception into ``fmi2Fatal``/``fmi3Fatal`` and free the instance's Python
+object, which leaves the host nothing to recover.
 
 An FMU's effect options (the catalogue's parameters of the effects that are its
 options) are declared by :func:`effect_options` from ``model/catalogue.py``, not here.
@@ -20,14 +27,28 @@ name of that FMU's own; it uses relative imports only.
 from __future__ import annotations
 
 import math
+import sys
 from typing import NamedTuple, Optional, Tuple
-
-from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
-from pythonfmu.enums import Fmi2Initial, Fmi2Status
 
 from .model.catalogue import of_fmu
 from .physics import reference_rig
 from .physics.validation import ParameterError
+
+#: The FMI version this copy targets: 3 where the bundle's package says so, else 2.
+FMI_VERSION = getattr(sys.modules.get(__package__ or ""), "FMI_VERSION", 2)
+
+if FMI_VERSION == 3:
+    from pythonfmu3 import (Boolean, Fmi3Causality as Causality, Fmi3Initial as Initial,
+                            Fmi3Slave as _FmiSlave, Fmi3Status as Status, Fmi3StepResult,
+                            Fmi3Variability as Variability, Float64 as Real, Int32 as Integer, String)
+    #: what ``do_step`` returns on failure: pythonfmu3 passes the status through
+    _STEP_FAILED = Fmi3StepResult(status=Status.error)
+else:
+    from pythonfmu import (Boolean, Fmi2Causality as Causality, Fmi2Slave as _FmiSlave,
+                           Fmi2Variability as Variability, Integer, Real, String)
+    from pythonfmu.enums import Fmi2Initial as Initial, Fmi2Status as Status
+    #: pythonfmu makes False fmi2Discard; the status shim raises it to the logged fmi2Error
+    _STEP_FAILED = False
 
 
 class Variable(NamedTuple):
@@ -61,18 +82,33 @@ def output(name, start, unit, description, depends=(), min=None, max=None, type=
     return Variable(name, "output", unit, description, start, min, max, type, tuple(depends))
 
 
+# -- physical bounds of the declared maxima ------------------------------------------------
+#: The longest stroke an FMU accepts [m]: the model's scope, DSNU-class cylinders of a
+#: mini-scale machine (the reference rig's 0.060 m, the whole excavator's 0.050 to
+#: 0.080 m in ``excavator.md``) with room to spare.  Every piston position declares it as
+#: its max, since x <= L <= L_MAX.
+L_MAX = 0.5
+#: The highest supply pressure an FMU accepts, absolute [Pa]: 10 bar gauge, the rating of
+#: the rig's valve and cylinder and the range of its 0 to 10 bar gauge transducers
+#: (``reference-rig.md`` supplies 6 bar).  The exhaust lies below the supply, so P_e too.
+P_S_MAX = reference_rig.P_atm + 1.0e6
+#: The largest ratio of specific heats of any ideal gas, 1 + 2/3 (a monatomic gas; air 1.4).
+K_MAX = 5.0 / 3.0
+#: The command range [V] (``reference-rig.md``: 0 to 10 V, 5 V closes every port).
+U_MIN, U_MAX = reference_rig.u_min, reference_rig.u_max
+
 #: The reference rig's constants as FMU parameters, declared once for every FMU that
 #: needs them (``reference-rig.md``; SI, pressures absolute).
 RIG_PARAMETERS = {v.name: v for v in (
-    parameter("P_s", reference_rig.P_s, "Pa", "supply pressure, absolute", min=0.0),
-    parameter("P_e", reference_rig.P_e, "Pa", "exhaust pressure, absolute", min=0.0),
+    parameter("P_s", reference_rig.P_s, "Pa", "supply pressure, absolute", min=0.0, max=P_S_MAX),
+    parameter("P_e", reference_rig.P_e, "Pa", "exhaust pressure, absolute", min=0.0, max=P_S_MAX),
     parameter("P_atm", reference_rig.P_atm, "Pa", "atmospheric pressure (it acts on the rod)", min=0.0),
-    parameter("k", reference_rig.k, "1", "ratio of specific heats of air", min=1.0),
+    parameter("k", reference_rig.k, "1", "ratio of specific heats of air", min=1.0, max=K_MAX),
     parameter("R", reference_rig.R, "J/(kg.K)", "specific gas constant of air", min=0.0),
     parameter("T", reference_rig.T, "K", "air temperature", min=0.0),
     parameter("A_a", reference_rig.A_a, "m2", "cap-side piston area", min=0.0),
     parameter("A_b", reference_rig.A_b, "m2", "rod-side annulus area", min=0.0),
-    parameter("L", reference_rig.L, "m", "stroke", min=0.0),
+    parameter("L", reference_rig.L, "m", "stroke", min=0.0, max=L_MAX),
     parameter("V_a0", reference_rig.V_a0, "m3", "dead volume of chamber A incl. port and hose", min=0.0),
     parameter("V_b0", reference_rig.V_b0, "m3", "dead volume of chamber B incl. port and hose", min=0.0),
     parameter("K_v", reference_rig.K_v, "N.s/m", "viscous friction coefficient", min=0.0),
@@ -110,7 +146,7 @@ def option_values(slave, fmu: str) -> dict:
 _TYPES = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
 
 
-class BoomSlave(Fmi2Slave):
+class BoomSlave(_FmiSlave):
     """Base of the boomfmi FMUs.
 
     Subclasses set ``variables``, and implement :meth:`setup` (check the parameters
@@ -125,23 +161,29 @@ class BoomSlave(Fmi2Slave):
         super().__init__(**kwargs)
         self.failure: Optional[str] = None
         self.start_time = 0.0
+        self._time = 0.0        # the last communication point
         for var in self.variables:
             owner_attr = getattr(type(self), var.name, None)
             if not isinstance(owner_attr, property):
                 setattr(self, var.name, var.start)
             if var.causality == "parameter":
-                kw = dict(causality=Fmi2Causality.parameter,
-                          variability=Fmi2Variability.fixed, initial=Fmi2Initial.exact)
+                kw = dict(causality=Causality.parameter,
+                          variability=Variability.fixed, initial=Initial.exact)
             elif var.causality == "input":
-                kw = dict(causality=Fmi2Causality.input,
-                          variability=(Fmi2Variability.continuous if var.type == "Real"
-                                       else Fmi2Variability.discrete))
+                kw = dict(causality=Causality.input,
+                          variability=(Variability.continuous if var.type == "Real"
+                                       else Variability.discrete))
             else:
-                kw = dict(causality=Fmi2Causality.output,
-                          variability=(Fmi2Variability.continuous if var.type == "Real"
-                                       else Fmi2Variability.discrete),
-                          initial=Fmi2Initial.calculated)
+                kw = dict(causality=Causality.output,
+                          variability=(Variability.continuous if var.type == "Real"
+                                       else Variability.discrete),
+                          initial=Initial.calculated)
             self.register_variable(_TYPES[var.type](var.name, description=var.description, **kw))
+        if FMI_VERSION == 3:    # FMI 3.0 declares time, the independent variable; registered
+            # last so that every declared variable keeps its FMI 2.0 value reference
+            self.register_variable(Real("time", causality=Causality.independent,
+                                        variability=Variability.continuous,
+                                        description="simulation time", getter=lambda: self._time))
 
     # -- to be provided by each FMU ------------------------------------------------
     def setup(self) -> None:
@@ -156,10 +198,11 @@ class BoomSlave(Fmi2Slave):
         """Report an error: logged with status fmi2Error, every later call fails too."""
         if self.failure is None:
             self.failure = message
-        self.log(message, Fmi2Status.error)
+        self.log(message, Status.error)
 
-    def setup_experiment(self, start_time, stop_time, tolerance):
-        self.start_time = float(start_time)
+    def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        # pythonfmu3 0.3.4 never calls this: an FMI 3.0 instance counts from 0 until its first step
+        self.start_time = self._time = float(start_time)
 
     def exit_initialization_mode(self):
         try:
@@ -190,14 +233,15 @@ class BoomSlave(Fmi2Slave):
 
     def do_step(self, current_time, step_size):
         if self.failure is not None:
-            self.log(f"cannot step: {self.failure}", Fmi2Status.error)
-            return False
+            self.log(f"cannot step: {self.failure}", Status.error)
+            return _STEP_FAILED
         if not step_size > 0.0:
             self.fail(f"communication step size must be > 0, got {step_size!r}")
-            return False
+            return _STEP_FAILED
         try:
             self.step(current_time, step_size)
         except (ValueError, ArithmeticError) as e:
             self.fail(f"step at t = {current_time:g} s failed: {e}")
-            return False
+            return _STEP_FAILED
+        self._time = current_time + step_size
         return True

@@ -12,16 +12,22 @@ For each ``fmus/<name>/<name>_fmu.py`` this
    ``UnitDefinitions``, ``unit``/``min``/``max`` on every Real, ``Outputs`` with their
    declared direct dependencies, ``InitialUnknowns`` (pythonfmu issue #193) and a
    ``DefaultExperiment``;
-4. puts the status shim (``status_shim.c``) in front of pythonfmu's Linux binary, so a
-   rejected parameter returns fmi2Error instead of fmi2Fatal;
+4. puts the status shim (``status_shim.c``) in front of pythonfmu's binaries: on Linux
+   always, on Windows where the build has mingw-w64 (``x86_64-w64-mingw32-gcc``).  The
+   shim loads the Python runtime the FMU was built with (recorded in
+   ``resources/boomfmi_runtime.txt``) in a host that has none, says why when it cannot,
+   and makes a rejected parameter return fmi2Error instead of fmi2Fatal;
+   ``modelDescription.xml`` states the platforms in a ``VendorAnnotations`` tool entry;
 5. validates the result with ``fmpy.validation.validate_fmu``.
 """
 from __future__ import annotations
 
 import importlib
+import os
 import shutil
 import subprocess
 import sys
+import sysconfig
 import tempfile
 import zipfile
 from pathlib import Path
@@ -83,24 +89,43 @@ def _format(value) -> str:
     return f"{value:.16g}" if isinstance(value, float) else str(value)
 
 
+#: FMI 3.0's element for each type of :class:`boomfmi.fmislave.Variable`
+FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String"}
+
+
 def complete_model_description(xml: bytes, variables, default_step: float = 1e-3,
                                default_stop: float = 1.0) -> bytes:
     """Add units, bounds, output dependencies, initial unknowns and a default experiment
-    to a pythonfmu modelDescription.xml, from the FMU class's ``variables`` table."""
+    to a pythonfmu (FMI 2.0) or pythonfmu3 (FMI 3.0) modelDescription.xml, from the FMU
+    class's ``variables`` table."""
     root = ET.fromstring(xml)
+    fmi3 = root.get("fmiVersion", "").startswith("3.")
     spec = {v.name: v for v in variables}
-    scalars = root.find("ModelVariables").findall("ScalarVariable")
-    index = {sv.get("name"): i + 1 for i, sv in enumerate(scalars)}
-    missing = set(spec) ^ set(index)
+    used_units = set()
+    if fmi3:        # a typed element per variable, referred to by its value reference
+        nodes = list(root.find("ModelVariables"))
+        for node in [n for n in nodes if n.get("causality") == "independent"]:
+            nodes.remove(node)          # time, which fmislave registers for FMI 3.0
+            node.set("unit", "s")
+            used_units.add("s")
+        ref = {node.get("name"): node.get("valueReference") for node in nodes}
+    else:           # a ScalarVariable per variable, referred to by its index from 1
+        nodes = root.find("ModelVariables").findall("ScalarVariable")
+        ref = {node.get("name"): str(i + 1) for i, node in enumerate(nodes)}
+    missing = set(spec) ^ set(ref)
     if missing:
         raise BuildError(f"variables declared and registered differ: {sorted(missing)}")
 
-    used_units = set()
-    for sv in scalars:
-        var = spec[sv.get("name")]
+    for node in nodes:
+        var = spec[node.get("name")]
         if not var.description:
             raise BuildError(f"variable {var.name} has no description")
-        type_node = sv.find(var.type)
+        if fmi3:
+            if node.tag != FMI3_TYPES[var.type]:
+                raise BuildError(f"variable {var.name}: registered as {node.tag}, declared {var.type}")
+            type_node = node
+        else:
+            type_node = node.find(var.type)
         if var.type == "Real":
             if var.unit not in UNITS:
                 raise BuildError(f"variable {var.name}: unit {var.unit!r} is not in boomfmi.units")
@@ -109,9 +134,11 @@ def complete_model_description(xml: bytes, variables, default_step: float = 1e-3
         for bound in ("min", "max"):
             value = getattr(var, bound)
             if value is not None:
-                type_node.set(bound, _format(float(value)))
+                type_node.set(bound, _format(float(value) if var.type == "Real" else int(value)))
+        if var.min is not None and var.max is not None and not var.min <= var.max:
+            raise BuildError(f"variable {var.name}: min {var.min!r} > max {var.max!r}")
 
-    # UnitDefinitions come right after CoSimulation in the FMI 2.0 schema.
+    # UnitDefinitions come right after CoSimulation in the FMI 2.0 and 3.0 schemas.
     units_node = ET.Element("UnitDefinitions")
     for unit in sorted(used_units):
         exponents, display = UNITS[unit]
@@ -135,53 +162,206 @@ def complete_model_description(xml: bytes, variables, default_step: float = 1e-3
     for child in list(structure):
         structure.remove(child)
     outputs = [v for v in variables if v.causality == "output"]
-    if outputs:
+    for var in outputs:
+        for dep in var.depends:
+            if spec.get(dep) is None or spec[dep].causality != "input":
+                raise BuildError(f"output {var.name} depends on {dep!r}, which is not an input")
+    if outputs and fmi3:
+        for var in outputs:
+            ET.SubElement(structure, "Output", valueReference=ref[var.name],
+                          dependencies=" ".join(ref[d] for d in var.depends),
+                          dependenciesKind=" ".join("dependent" for _ in var.depends))
+        for var in outputs:
+            ET.SubElement(structure, "InitialUnknown", valueReference=ref[var.name])
+    elif outputs:
         out_node = ET.SubElement(structure, "Outputs")
         for var in outputs:
-            for dep in var.depends:
-                if spec.get(dep) is None or spec[dep].causality != "input":
-                    raise BuildError(f"output {var.name} depends on {dep!r}, which is not an input")
-            deps = " ".join(str(index[d]) for d in var.depends)
-            ET.SubElement(out_node, "Unknown", index=str(index[var.name]), dependencies=deps,
+            ET.SubElement(out_node, "Unknown", index=ref[var.name],
+                          dependencies=" ".join(ref[d] for d in var.depends),
                           dependenciesKind=" ".join("dependent" for _ in var.depends))
         init_node = ET.SubElement(structure, "InitialUnknowns")
         for var in outputs:
-            ET.SubElement(init_node, "Unknown", index=str(index[var.name]))
+            ET.SubElement(init_node, "Unknown", index=ref[var.name])
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
-def compile_shim(out: Path) -> Path:
-    """Compile the status shim with the FMI 2.0 headers that fmpy ships."""
+#: The FMI 2.0 platforms a boomfmi FMU has binaries for: pythonfmu 0.7.0 ships these two
+#: and nothing else (no darwin64, no aarch64, no 32-bit).  For each: the compilers that
+#: build its shim (the first found on PATH), the binary's suffix and the extra flags.
+SHIM_PLATFORMS = {
+    "linux64": (("cc", "gcc"), ".so", ["-fPIC"], ["-ldl"]),
+    "win64": (("x86_64-w64-mingw32-gcc",), ".dll", [], ["-static-libgcc", "-ladvapi32"]),
+}
+#: Where the shim reads the Python runtime the FMU was built with.
+RUNTIME_RECORD = "resources/boomfmi_runtime.txt"
+#: The environment variable that names another libpython / python3XY.dll.
+LIBPYTHON_ENV = "BOOMFMI_LIBPYTHON"
+_said_no_win64 = False
+
+
+def shim_compiler(platform: str) -> str | None:
+    """The compiler on PATH that builds the shim for ``platform``, or None."""
+    for name in SHIM_PLATFORMS[platform][0]:
+        found = shutil.which(name)
+        if found:
+            return found
+    return None
+
+
+def compile_shim(out: Path, platform: str = "linux64") -> Path:
+    """Compile the status shim for ``platform`` with the FMI 2.0 headers that fmpy ships."""
     import fmpy
     include = Path(fmpy.__file__).parent / "c-code"
-    cc = shutil.which("cc") or shutil.which("gcc")
+    cc = shim_compiler(platform)
     if cc is None:
-        raise BuildError("no C compiler (cc or gcc) on PATH: needed for the FMUs' status shim")
-    cmd = [cc, "-shared", "-fPIC", "-O2", "-Wall", "-Wextra", "-Werror", f"-I{include}",
-           "-o", str(out), str(SHIM_SOURCE), "-ldl"]
+        names = " or ".join(SHIM_PLATFORMS[platform][0])
+        raise BuildError(f"no C compiler ({names}) on PATH: needed for the FMUs' {platform} status shim")
+    _, _, flags, libs = SHIM_PLATFORMS[platform]
+    cmd = [cc, "-shared", *flags, "-O2", "-Wall", "-Wextra", "-Werror", f"-I{include}",
+           "-o", str(out), str(SHIM_SOURCE), *libs]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
-        raise BuildError(f"compiling {SHIM_SOURCE.name} failed:\n{proc.stderr}")
+        raise BuildError(f"compiling {SHIM_SOURCE.name} for {platform} failed:\n{proc.stderr}")
     return out
 
 
-def _rewrite(fmu: Path, model_description: bytes, model_identifier: str, shim: Path) -> None:
-    """Replace modelDescription.xml and put the shim in front of the Linux binary."""
-    linux_binary = f"binaries/linux64/{model_identifier}.so"
+def compile_shims(folder: Path) -> dict[str, Path]:
+    """Every shim this machine can build: linux64 always (a C compiler is required),
+    win64 where mingw-w64 is installed; without it the build says so, once."""
+    global _said_no_win64
+    shims = {"linux64": compile_shim(Path(folder) / "shim.so", "linux64")}
+    if shim_compiler("win64"):
+        shims["win64"] = compile_shim(Path(folder) / "shim.dll", "win64")
+    elif not _said_no_win64:
+        _said_no_win64 = True
+        print("boomfmi.fmubuild: x86_64-w64-mingw32-gcc is not installed, so the FMUs ship "
+              "linux64 with the status shim and win64 with pythonfmu's own binary only "
+              "(it loads in a Python host alone); install mingw-w64 for the win64 shim",
+              file=sys.stderr)
+    return shims
+
+
+def _platform_tag() -> str:
+    return "win64" if sys.platform == "win32" else "linux64"
+
+
+def runtime_record() -> str:
+    """resources/boomfmi_runtime.txt: the Python runtime this build runs in, which the
+    shim loads in a host that has no Python of its own (see status_shim.c)."""
+    import numpy
+    version = f"{sys.version_info.major}.{sys.version_info.minor}"
+    tag = _platform_tag()
+    paths = []
+    for entry in (sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"],
+                  str(Path(numpy.__file__).resolve().parents[1])):
+        if entry not in paths:
+            paths.append(entry)
+    if tag == "win64":
+        libpython = Path(sys.base_prefix) / f"python{sys.version_info.major}{sys.version_info.minor}.dll"
+        soname = libpython.name
+    else:
+        soname = sysconfig.get_config_var("INSTSONAME") or sysconfig.get_config_var("LDLIBRARY") or ""
+        libpython = Path(sysconfig.get_config_var("LIBDIR") or sys.base_prefix) / soname
+    if not sysconfig.get_config_var("Py_ENABLE_SHARED") and tag == "linux64":
+        print(f"boomfmi.fmubuild: this Python has no shared libpython: in a host without Python "
+              f"the FMUs need {LIBPYTHON_ENV} to name one", file=sys.stderr)
+    lines = [
+        "# The Python runtime this FMU was built with (boomfmi.fmubuild).  In a host that has",
+        "# no Python of its own the FMU's binary loads <platform>.libpython (else <platform>.soname",
+        f"# from the loader's search path; ${LIBPYTHON_ENV} overrides both) and starts it with",
+        "# PYTHONHOME=<platform>.home and PYTHONPATH=<platform>.path unless those are set.",
+        f"version={version}",
+        f"{tag}.libpython={libpython}",
+        f"{tag}.soname={soname}",
+        f"{tag}.home={sys.base_prefix}",
+        f"{tag}.path={os.pathsep.join(paths)}",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def _platform_notes(shims: dict[str, Path]) -> dict[str, str]:
+    version = f"{sys.version_info.major}.{sys.version_info.minor}"
+    dll = f"python{sys.version_info.major}{sys.version_info.minor}.dll"
+    built_here = _platform_tag()
+    anywhere = "runs in any FMI 2.0 host: in a Python host it uses that Python; in a host without Python it loads"
+    where = {"linux64": f"libpython{version}", "win64": dll}
+    notes = {}
+    for platform, os_name, library in (("linux64", "x86-64 Linux (glibc)", "binary"),
+                                       ("win64", "64-bit Windows", "DLL")):
+        if platform not in shims:
+            continue
+        if platform == built_here:
+            found = (f"the Python {version} this FMU was built with, as {RUNTIME_RECORD} records it, "
+                     f"else {where[platform]} from the system's library search")
+        else:
+            found = (f"Python {version}: the {dll} the Python installer registered (PEP 514), "
+                     f"else {dll} on PATH")
+        notes[platform] = (f"{os_name}, status shim in front of pythonfmu's {library}; {anywhere} "
+                           f"${LIBPYTHON_ENV}, else {found}; that Python must have numpy")
+    if "win64" in shims and built_here != "win64":
+        notes["win64"] += " (not run on Windows by boomfmi's tests)"
+    if "win64" not in shims:
+        notes["win64"] = ("64-bit Windows, pythonfmu's own DLL without the status shim (this build had "
+                          "no mingw-w64): it loads only in a Python host whose folder holds python3.dll")
+    return notes
+
+
+def platform_annotation(xml: bytes, model_identifier: str, shims: dict[str, Path]) -> bytes:
+    """State in an FMI 2.0 modelDescription.xml (``VendorAnnotations``, tool ``boomfmi``)
+    the platforms the FMU's binaries run on, and those it has none for."""
+    root = ET.fromstring(xml)
+    if not root.get("fmiVersion", "").startswith("2."):
+        return xml
+    vendor = root.find("VendorAnnotations")
+    if vendor is None:
+        vendor = ET.Element("VendorAnnotations")
+        # after DefaultExperiment, before ModelVariables (the FMI 2.0 schema's order)
+        root.insert(list(root).index(root.find("ModelVariables")), vendor)
+    for tool in vendor.findall("Tool"):
+        if tool.get("name") == "boomfmi":
+            vendor.remove(tool)
+    tool = ET.SubElement(vendor, "Tool", name="boomfmi")
+    platforms = ET.SubElement(tool, "Platforms")
+    for name, note in _platform_notes(shims).items():
+        suffix = SHIM_PLATFORMS[name][1]
+        ET.SubElement(platforms, "Platform", name=name, binary=f"binaries/{name}/{model_identifier}{suffix}",
+                      shim="true" if name in shims else "false", description=note)
+    ET.SubElement(platforms, "Unsupported", platforms="darwin64 aarch64 linux32 win32",
+                  description="no binaries: pythonfmu 0.7.0 ships none for these platforms")
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def _rewrite(fmu: Path, model_description: bytes, model_identifier: str, shim,
+             win64_shim: Path | None = None) -> None:
+    """Replace modelDescription.xml (stating the platforms), put the shims in front of
+    pythonfmu's binaries and record the build's Python runtime.  ``shim`` is the Linux
+    shim, or a ``{platform: shim}`` mapping as :func:`compile_shims` returns."""
+    shims = dict(shim) if isinstance(shim, dict) else {"linux64": Path(shim)}
+    if win64_shim is not None:
+        shims["win64"] = Path(win64_shim)
+    binaries = {f"binaries/{p}/{model_identifier}{SHIM_PLATFORMS[p][1]}": p for p in shims}
+    model_description = platform_annotation(model_description, model_identifier, shims)
     tmp = fmu.with_suffix(".tmp")
     with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as dst:
         names = src.namelist()
-        if linux_binary not in names:
-            raise BuildError(f"{fmu.name}: pythonfmu wrote no {linux_binary}")
+        for binary in binaries:
+            if binary not in names:
+                raise BuildError(f"{fmu.name}: pythonfmu wrote no {binary}")
         for name in names:
             if name == "modelDescription.xml":
                 dst.writestr(name, model_description)
-            elif name == linux_binary:
-                dst.writestr(f"binaries/linux64/{model_identifier}_pythonfmu.so", src.read(name))
-                dst.write(shim, linux_binary)
+            elif name in binaries:
+                platform = binaries[name]
+                suffix = SHIM_PLATFORMS[platform][1]
+                dst.writestr(f"binaries/{platform}/{model_identifier}_pythonfmu{suffix}", src.read(name))
+                dst.write(shims[platform], name)
+            elif name == RUNTIME_RECORD:
+                continue
             else:
                 dst.writestr(src.getinfo(name), src.read(name))
+        dst.writestr(RUNTIME_RECORD, runtime_record())
     tmp.replace(fmu)
 
 
@@ -213,8 +393,7 @@ def build_fmu(fmu_dir: Path, out_dir: Path) -> Path:
         if model_identifier != name:
             raise BuildError(f"{script.name}: modelName must be {name!r}, is {model_identifier!r}")
         xml = complete_model_description(xml, cls.variables)
-        shim = compile_shim(tmp / "shim.so")
-        _rewrite(target, xml, model_identifier, shim)
+        _rewrite(target, xml, model_identifier, compile_shims(tmp))
     validate(target)
     return target
 

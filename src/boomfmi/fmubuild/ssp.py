@@ -10,6 +10,11 @@ hierarchical names, ``ssp/reference_rig.ssv``; a component binding of
 ``resources/<set>_<component>.ssv`` that has no file of its own in ``ssp/`` is cut from
 ``ssp/<set>.ssv`` when packing: the entries ``<component>.*``, with bare names, in a
 parameter set named ``<set>``.
+
+fmpy's own SSP runner (``fmpy.ssp.simulation``, 0.3.32) wires a component's input
+connector that no connection ends at to the source of the connection found before it,
+or fails; :func:`pack_ssp` therefore refuses such a connector (a free input is left
+undeclared, and set by variable name).
 """
 from __future__ import annotations
 
@@ -64,10 +69,27 @@ def fmus_of(ssd: Path) -> set[str]:
             for source, _ in referenced_sources(Path(ssd)) if source.endswith(".fmu")}
 
 
+def unconnected_inputs(ssd: Path) -> list[str]:
+    """``component.connector`` of every input connector that ``ssd`` declares on a
+    component but that no connection ends at."""
+    system = ET.parse(ssd).getroot().find("ssd:System", NS)
+    ends = {(c.get("endElement"), c.get("endConnector"))
+            for c in system.findall("ssd:Connections/ssd:Connection", NS)}
+    return [f"{comp.get('name')}.{c.get('name')}"
+            for comp in system.findall("ssd:Elements/ssd:Component", NS)
+            for c in comp.findall("ssd:Connectors/ssd:Connector", NS)
+            if c.get("kind") == "input" and (comp.get("name"), c.get("name")) not in ends]
+
+
 def pack_ssp(ssd: Path, fmu_dir: Path, out: Path) -> Path:
     """Zip ``ssd`` as SystemStructure.ssd with the FMUs (from ``fmu_dir``) and parameter
     sets (beside ``ssd``) that it references under ``resources/``."""
     ssd = Path(ssd)
+    loose = unconnected_inputs(ssd)
+    if loose:
+        raise BuildError(f"{ssd}: input connector(s) {', '.join(loose)} end no connection; fmpy's "
+                         f"SSP runner would wire them to another connection's source.  Leave a "
+                         f"free input undeclared (it is set by variable name)")
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_suffix(".tmp")
