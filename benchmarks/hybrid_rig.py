@@ -1063,7 +1063,8 @@ def simulate(plant: Plant | None, profile, duration=None, fs=None, seed=0, x0=No
     return a recording as a DataFrame: ``t`` (from 0, every 1/fs), ``u``, ``p_a``, ``p_b``
     (gauge, measured), ``alpha`` (rad, measured), and the truth ``x_true``, ``v_true``,
     ``p_a_true``, ``p_b_true`` (gauge), ``alpha_true``, ``mode`` (1/-1 slipping, 0 sticking,
-    2/-2 held at x = L / x = 0).
+    2/-2 held at x = L / x = 0), and ``p_a_sensed``, ``p_b_sensed``, ``alpha_sensed``: what
+    reaches the converters (through the sensor path's lag, before noise and rounding).
 
     ``fs`` [Hz]: None is ``plant.sensors["fs"]`` or 1000.  ``seed``: the sensor noise's
     numpy Generator.  ``x0``: None (x = 0, chambers at atmosphere), a position [m], or a
@@ -1238,6 +1239,8 @@ def simulate(plant: Plant | None, profile, duration=None, fs=None, seed=0, x0=No
     rng = np.random.default_rng(seed)
     a_meas, pa_meas, pb_meas = _sensors(m.sens, a_m, pa_m - P_atm, pb_m - P_atm, rng)
     frame["p_a"], frame["p_b"], frame["alpha"] = pa_meas, pb_meas, a_meas
+    # what reaches the converters: the sensor path (its lag) without noise or rounding
+    frame["p_a_sensed"], frame["p_b_sensed"], frame["alpha_sensed"] = pa_m - P_atm, pb_m - P_atm, a_m
     frame["x_true"] = x
     frame["v_true"] = Y[1, i_s]
     frame["p_a_true"] = Y[2, i_s] - P_atm

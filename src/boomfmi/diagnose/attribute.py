@@ -31,13 +31,17 @@ and p_b.
 Decisions carry margins against the recordings' own noise:
 
 * no gap: the baseline's holdout error is within ``NOISE_FACTOR`` times the noise
-  floor (each channel's noise over its range), plus what the baseline's own
-  uncertainty moves it (each identified parameter at the nearer end of its 95 %
-  interval: :func:`baseline_spread`), plus ``ABS_FLOOR``: verdict ``[]``, and no
-  candidate is fitted (none could show more than the noise);
+  floor (each channel's noise over its range) plus ``ABS_FLOOR``: verdict ``[]``, and
+  no candidate is fitted (none could show more than the noise);
 * a pair that passes (see above): the pair; else the best single effect if it
   shrinks the error by at least ``MIN_SHRINK``;
-* otherwise ``["unexplained"]``.
+* otherwise ``["unexplained"]``, but only where the gap is also beyond what the
+  baseline's own uncertainty moves its prediction (each identified parameter at the
+  nearer end of its 95 % interval, combined in quadrature: :func:`baseline_spread`);
+  a gap within that, which no effect explains, is ``[]``: the identification itself
+  leaves it open.  (A threshold that added the spread before any fit hid effects the
+  baseline's re-identification had made uncertain: those effects widen the intervals
+  they are then hidden behind.)
 """
 from __future__ import annotations
 
@@ -183,8 +187,9 @@ class Attribution:
     gap: bool
     candidates: list
     verdict: list
-    threshold: float = 0.0    #: the summed NRMSE a gap must exceed
+    threshold: float = 0.0    #: the summed NRMSE beyond which a gap no effect explains is "unexplained"
     spread: dict = field(default_factory=dict)   #: the baseline's own uncertainty, per channel
+    beyond_noise: float = 0.0  #: the summed NRMSE beyond which candidates are fitted (noise alone)
 
 
 def _fit_and_score(args):
@@ -296,11 +301,15 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     floors = [noise_floor(r) for r in hold_recs]
     noise = {c: float(np.mean([f[c] for f in floors])) for c in CHANNELS}
     spread = baseline_spread(values, intervals or {}, hold_recs, base, workers)
-    threshold = NOISE_FACTOR * sum(noise.values()) + sum(spread.values()) + ABS_FLOOR
-    gap = sum(before.values()) > threshold
-    if not gap:        # nothing beyond the noise and the baseline's own uncertainty: no fit can show more
+    beyond_noise = NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR
+    threshold = beyond_noise + sum(spread.values())
+    gap = sum(before.values()) > beyond_noise
+    # within the baseline's own uncertainty a gap is no finding by itself: an effect that
+    # explains it is still named, but what no effect explains there is not "unexplained"
+    uncertain = sum(before.values()) <= threshold
+    if not gap:        # nothing beyond the noise: no fit can show more
         att = Attribution(before, noise, gap, [], [])
-        att.threshold, att.spread = threshold, spread
+        att.threshold, att.spread, att.beyond_noise = threshold, spread, beyond_noise
         return att
     base_cost = sum(e * e for e in mean_errors(values, {}, fit_recs, FIT_RTOL).values())
     fitted = _map(_fit_and_score, [(n, values, fit_recs, hold_recs, None, base_cost) for n in names], workers)
@@ -327,10 +336,10 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
             cands.insert(0, pair)
         elif best.shrink >= MIN_SHRINK:
             verdict = [best.name]
-        else:
+        elif not uncertain:
             verdict = ["unexplained"]
     att = Attribution(before, noise, gap, cands, verdict)
-    att.threshold, att.spread = threshold, spread
+    att.threshold, att.spread, att.beyond_noise = threshold, spread, beyond_noise
     return att
 
 

@@ -96,8 +96,9 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
                         "warnings": result.warnings},
            "noise_floor": {k: round(v, 6) for k, v in att.noise.items()},
            "baseline_spread": {k: round(v, 6) for k, v in att.spread.items()},
-           "gap_threshold": round(att.threshold, 6),
+           "gap_threshold": round(att.beyond_noise, 6),
            "gap_beyond_noise": att.gap,
+           "unexplained_threshold": round(att.threshold, 6),
            "where": loc.where if loc else [],
            "effects": effects,
            "verdict": att.verdict}
@@ -168,11 +169,16 @@ def _html(doc: dict, images: list[str]) -> str:
     verdict = doc["verdict"]
     if not doc.get("judgeable", True):
         headline = f"Cannot be judged: {e(doc['reason'])}"
-    elif verdict == []:
-        headline = ("No gap beyond the recordings' noise and the baseline's own uncertainty: the baseline "
-                    f"model explains them (holdout error {100 * sum((doc['baseline'] or {}).get('nrmse_holdout', {}).values()):.2f} % "
+    elif verdict == [] and not doc.get("gap_beyond_noise"):
+        headline = ("No gap beyond the recordings' noise: the baseline model explains them (holdout error "
+                    f"{100 * sum((doc['baseline'] or {}).get('nrmse_holdout', {}).values()):.2f} % "
                     f"against a threshold of {100 * doc.get('gap_threshold', 0.0):.2f} %, summed over p_a, p_b, x); "
                     "no candidate effect was fitted.")
+    elif verdict == []:
+        headline = ("A gap beyond the recordings' noise but within what the baseline's own uncertainty leaves "
+                    f"open (holdout error {100 * sum((doc['baseline'] or {}).get('nrmse_holdout', {}).values()):.2f} % "
+                    f"against {100 * doc.get('unexplained_threshold', 0.0):.2f} %, summed over p_a, p_b, x), "
+                    "and no candidate effect explains it: no finding.")
     elif verdict == ["unexplained"]:
         headline = "A gap that no candidate effect explains (see where it lies below)."
     else:
@@ -201,9 +207,10 @@ td,th{{border:1px solid #ccc;padding:4px 8px;font-size:13px}}</style></head><bod
 Holdout NRMSE p_a / p_b / x: {before}.</p>{warnings}
 <h2>Before and after, on the holdout recording</h2>{imgs}
 <h2>Where the gap lies</h2><table><tr><th>channel</th><th>regime</th><th>subsystem</th><th>share</th><th>windows [s]</th></tr>{where}</table>
-<h2>Candidate effects, best first</h2><p>The gap's threshold (summed NRMSE): {100 * doc.get("gap_threshold", 0.0):.3f} %:
-{NOISE_FACTOR:g} times the noise floor {e(json.dumps(doc.get("noise_floor", {})))}, the baseline's own spread
-{e(json.dumps(doc.get("baseline_spread", {})))} and {100 * ABS_FLOOR:g} %.</p>
+<h2>Candidate effects, best first</h2><p>Candidates are fitted beyond a gap (summed NRMSE) of {100 * doc.get("gap_threshold", 0.0):.3f} %:
+{NOISE_FACTOR:g} times the noise floor {e(json.dumps(doc.get("noise_floor", {})))} and {100 * ABS_FLOOR:g} %;
+a gap no candidate explains is "unexplained" beyond {100 * doc.get("unexplained_threshold", 0.0):.3f} %, which adds the
+baseline's own spread {e(json.dumps(doc.get("baseline_spread", {})))}.</p>
 <table><tr><th>effect</th><th>fitted parameters</th><th>shrink</th><th>score</th>
 <th>holdout NRMSE after (p_a / p_b / x)</th></tr>{rows}</table>
 {conf}
