@@ -64,8 +64,6 @@ NO_MAX = {
     ("cylinder", "C_leak"): EFFECT,
     ("cylinder", "A_leak"): EFFECT,
     ("cylinder", "A_cushion"): EFFECT,
-    ("cylinder", "l_cushion"): ("at most L/2, which set-up checks; the catalogue of effects (model/catalogue.py), "
-                                "whence the effect options' bounds come, declares no max for it yet (L_MAX/2 would do)"),
     ("boom_load", "p_a"): CHAMBER,
     ("boom_load", "p_b"): CHAMBER,
     ("boom_load", "f_ext"): FORCE,

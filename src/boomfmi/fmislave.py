@@ -32,6 +32,7 @@ from typing import NamedTuple, Optional, Tuple
 
 from .model.catalogue import of_fmu
 from .physics import reference_rig
+from .physics.params import L_MAX
 from .physics.validation import ParameterError
 
 #: The FMI version this copy targets: 3 where the bundle's package says so, else 2.
@@ -83,11 +84,8 @@ def output(name, start, unit, description, depends=(), min=None, max=None, type=
 
 
 # -- physical bounds of the declared maxima ------------------------------------------------
-#: The longest stroke an FMU accepts [m]: the model's scope, DSNU-class cylinders of a
-#: mini-scale machine (the reference rig's 0.060 m, the whole excavator's 0.050 to
-#: 0.080 m in ``excavator.md``) with room to spare.  Every piston position declares it as
-#: its max, since x <= L <= L_MAX.
-L_MAX = 0.5
+#: The longest stroke an FMU accepts [m] (``physics.params.L_MAX``): every piston
+#: position declares it as its max, since x <= L <= L_MAX.
 #: The highest supply pressure an FMU accepts, absolute [Pa]: 10 bar gauge, the rating of
 #: the rig's valve and cylinder and the range of its 0 to 10 bar gauge transducers
 #: (``reference-rig.md`` supplies 6 bar).  The exhaust lies below the supply, so P_e too.

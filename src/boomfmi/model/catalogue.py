@@ -32,6 +32,7 @@ from __future__ import annotations
 from typing import Callable, NamedTuple, Optional, Tuple
 
 from ..physics import effects as fx
+from ..physics.params import L_MAX
 
 #: the stages of the boom model, in the order it applies them
 STAGES = ("spool", "command", "port", "seal", "heat", "friction", "measurement")
@@ -148,7 +149,7 @@ EFFECTS = {e.name: e for e in (
            "Coulomb level F_d + (F_s - F_d) exp(-|v| / v_s)", _stribeck),
     Effect("end_cushioning", "cylinder", "port",
            ((_p("length", "m", 2e-3, 0.02, False, "l_cushion",
-                "end_cushioning: cushion length at each end of stroke; 0: off"),
+                "end_cushioning: cushion length at each end of stroke (at most L/2); 0: off", max=L_MAX / 2),
              _p("A_n", "m2", 1e-8, 4e-6, True, "A_cushion",
                 "end_cushioning: cushion needle's orifice area", start=1e-7, switch=False)),),
            "within length of a chamber's end, its outflow also passes the cushion needle "

@@ -13,6 +13,13 @@ from .validation import (ParameterError, require_finite, require_non_negative,
                          require_positive)
 
 
+#: The longest stroke the model accepts [m]: its scope, DSNU-class cylinders of a
+#: mini-scale machine (the reference rig's 0.060 m, the whole excavator's 0.050 to
+#: 0.080 m in ``excavator.md``) with room to spare.  Every piston position is bounded by
+#: it, since x <= L <= L_MAX, and a stroke-end cushion by half of it.
+L_MAX = 0.5
+
+
 class Gas(NamedTuple):
     """Thermodynamic constants of the air (Eq. 1, 4 to 7)."""
     k: float = reference_rig.k      #: ratio of specific heats [1]
