@@ -8,6 +8,9 @@
     boomfmi identify RUN.csv [RUN.csv ...] [--method paper|fit] [--a-max] [--holdout H.csv] --out params.json
     boomfmi diagnose FIT.csv [FIT.csv ...] --holdout HOLD.csv [HOLD.csv ...] --out DIR
     boomfmi describe FMU [FMU ...]      the FMUs' interfaces as Markdown tables
+    boomfmi recording import FILE --map "t=1:ms,u=2:V,..." [--delimiter D] [--skip-rows N] --out run.csv
+    boomfmi bench friction FIT... (--holdout HOLD... | --split-strokes) --area A --out DIR [map options]
+    boomfmi bench leak RUN... --volume V --out DIR [map options]
     boomfmi check FMU_DIR               validate every FMU and replay its reference result
 """
 from __future__ import annotations
@@ -234,6 +237,94 @@ def _diagnose(args) -> int:
     return 0
 
 
+def _separators(values, option: str):
+    """``--decimal``/``--thousands`` values: one character for every column, or
+    NAME=CHAR for some (repeatable)."""
+    if not values:
+        return None
+    named = [v for v in values if "=" in v and len(v) > 1]
+    if not named:
+        if len(values) > 1:
+            raise ValueError(f"{option} given {len(values)} times: give one character, or NAME=CHAR per column")
+        return values[0]
+    if len(named) != len(values):
+        raise ValueError(f"{option}: give one character for every column or NAME=CHAR for some, not both")
+    return dict(v.split("=", 1) for v in named)
+
+
+def _read_options(args) -> dict:
+    """The foreign-file read options of the map arguments (a --preset's, overridden)."""
+    from .foreign import read_options
+    return read_options(args.preset, map=args.map, delimiter=args.delimiter, skip_rows=args.skip_rows,
+                        header=True if args.header else None, decimal=_separators(args.decimal, "--decimal"),
+                        thousands=_separators(args.thousands, "--thousands"), encoding=args.encoding)
+
+
+def _add_map_options(p) -> None:
+    from .foreign import PRESETS
+    p.add_argument("--map", help="the columns: NAME=COLUMN:UNIT,... with COLUMN a 1-based number or (with "
+                                 "--header) a header name and UNIT any pint unit, e.g. "
+                                 "\"t=1:ms,x=5:mm,p_gauge=6:bar,F=7:N\"; pressures say p_gauge or p_abs")
+    p.add_argument("--delimiter", help="tab (default), comma, semicolon, space, whitespace, or one character")
+    p.add_argument("--skip-rows", type=int, help="lines to drop at the top (start-up samples, a preamble)")
+    p.add_argument("--header", action="store_true", help="the first line after the skipped ones names the columns")
+    p.add_argument("--decimal", action="append", metavar="CHAR|NAME=CHAR",
+                   help="decimal mark (default '.', or ',' where --thousands is '.'); NAME=CHAR for one column")
+    p.add_argument("--thousands", action="append", metavar="CHAR|NAME=CHAR",
+                   help="thousands separator (default none); NAME=CHAR for one column, e.g. t=.")
+    p.add_argument("--encoding", help="the file's text encoding (default utf-8)")
+    p.add_argument("--preset", choices=sorted(PRESETS),
+                   help="a known source's map and layout (zillen2021: the friction tests, zillen2021-leak: the "
+                        "leak-down tests of Zillen, Vallery, Smit 2021); the options above override it")
+
+
+def _recording_import(args) -> int:
+    from .foreign import import_recording
+    out = import_recording(args.file, args.out, _read_options(args))
+    from .recording import read_recording
+    rec = read_recording(out)
+    print(f"wrote {out}: {len(rec.data)} rows, columns {', '.join(rec.data.columns)}")
+    return 0
+
+
+def _progress(command: str):
+    return lambda text: print(f"{command}: {text}", file=sys.stderr, flush=True)
+
+
+def _bench_friction(args) -> int:
+    from .bench import quantity, run_friction
+    area = quantity(args.area, "m**2", "--area")
+    doc = run_friction(args.fit, args.holdout, area, _read_options(args), args.out, split=args.split_strokes,
+                       smooth=args.smooth, n_boot=args.n_boot, progress=_progress("bench friction"))
+    for law, L in doc["laws"].items():
+        P = L["parameters"]
+        extra = (f", F_d(p) = {P['F_d0']:.3g} N + {P['c_d'] * 1e5:.3g} N/bar * p" if law == "pressure" else "")
+        print(f"{law:9s} holdout RMSE {L['rmse_holdout_N']:.3f} N (fit {L['rmse_fit_N']:.3f} N); "
+              f"A_eff = {P['A_eff'] * 1e6:.2f} mm^2, F_0 = {P['F_0']:.2f} N{extra}")
+    for w in doc["warnings"]:
+        print(f"warning: {w}")
+    print(f"chosen: {doc['chosen']}")
+    print(f"wrote {args.out}/friction.json, friction.html, friction_velocity.png, friction_pressure.png")
+    return 0
+
+
+def _bench_leak(args) -> int:
+    from .bench import parse_pressure, quantity, run_leak
+    volume = quantity(args.volume, "m**3", "--volume")
+    p_start = parse_pressure(args.p_start) if args.p_start else None
+    doc = run_leak(args.runs, volume, _read_options(args), args.out, p_start=p_start, start=args.start,
+                   progress=_progress("bench leak"))
+    for r in doc["runs"]:
+        size = r["size"]
+        value = (f"A = {size['value'] * 1e6:.3g} mm^2 [{size['ci95'][0] * 1e6:.3g}, {size['ci95'][1] * 1e6:.3g}]"
+                 if size["name"] == "A" else
+                 f"C = {size['value']:.3g} kg/(s Pa) [{size['ci95'][0]:.3g}, {size['ci95'][1]:.3g}]")
+        print(f"{r['file']}: {r['chosen']} ({r['laminar_vs_orifice']}), {value}, drop {1e3 * r['drop_bar']:.1f} mbar "
+              f"in {r['duration_s']:.0f} s")
+    print(f"wrote {args.out}/leak.json, leak.png")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="boomfmi", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -327,6 +418,40 @@ def main(argv=None) -> int:
     p.add_argument("--stop", type=float, default=None, help="--export: to this time [s]")
     p.add_argument("--size", default="1280x720", help="--export: WIDTHxHEIGHT in pixels (default 1280x720)")
     p.set_defaults(run=_view)
+
+    p = sub.add_parser("recording", help="recordings: import a foreign measurement file")
+    rec_sub = p.add_subparsers(dest="recording_command", required=True)
+    p = rec_sub.add_parser("import", help="convert a delimited text file into the recording format, by a column map")
+    p.add_argument("file", type=Path)
+    _add_map_options(p)
+    p.add_argument("--out", type=Path, required=True, help="the recording to write (CSV)")
+    p.set_defaults(run=_recording_import)
+    p = sub.add_parser("bench", help="the test bench: friction and leak-down tests of a cylinder")
+    bench_sub = p.add_subparsers(dest="bench_command", required=True)
+    p = bench_sub.add_parser("friction", help="fit the friction laws (eq9, stribeck, pressure), score them on "
+                                              "held-out tests, choose one")
+    p.add_argument("fit", nargs="+", type=Path, help="FIT files: friction tests (t, x, p, F) the laws are fitted on")
+    p.add_argument("--holdout", nargs="+", type=Path, default=[], help="HOLD files, never fitted on: the score")
+    p.add_argument("--split-strokes", action="store_true",
+                   help="fit on the first half of each FIT file's strokes, score also on the second half")
+    p.add_argument("--area", required=True, help="the piston's nominal area: m^2, or with a unit ('490.9 mm^2')")
+    p.add_argument("--smooth", type=_positive, default=None, help="bandwidth of the velocity's smoothing [s] "
+                                                                  "(default 0.03)")
+    p.add_argument("--n-boot", type=int, default=None, help="bootstrap replicates of the intervals (default 200)")
+    _add_map_options(p)
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.set_defaults(run=_bench_friction)
+    p = bench_sub.add_parser("leak", help="fit leak-down curves with the laminar and orifice laws, with and without "
+                                          "thermal relaxation")
+    p.add_argument("runs", nargs="+", type=Path, help="leak-down runs (t and p_gauge, p_abs, or dp with --p-start)")
+    p.add_argument("--volume", required=True, help="the chamber's volume: m^3, or with a unit ('0.5 L')")
+    p.add_argument("--p-start", help="for a map with dp (a pressure change): the gauge pressure at the first "
+                                     "sample, with its unit ('7.5 bar')")
+    p.add_argument("--start", type=float, default=None,
+                   help="the time the chamber was closed, in the file's time [s] (default: found)")
+    _add_map_options(p)
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.set_defaults(run=_bench_leak)
 
     p = sub.add_parser("describe", help="print FMU interfaces as Markdown tables")
     p.add_argument("fmus", nargs="+", type=Path)
