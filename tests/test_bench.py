@@ -13,6 +13,7 @@ from boomfmi.bench import run_friction
 from boomfmi.bench.friction import bench_friction
 from boomfmi.bench.leak import bench_leak, closing
 from boomfmi.cli import main
+from boomfmi.physics import effects as fx
 from boomfmi.foreign import read_options
 from boomfmi.physics import friction_laws as fl
 from boomfmi.physics import leak_laws as ll
@@ -69,8 +70,8 @@ def test_seal_friction_is_eq9_with_a_level_for_each_direction():
     f = fl.seal_friction(v, drive, 5.0, 7.0, 4.0, 6.0, 100.0, 200.0)
     # at rest within -F_s_neg..F_s_pos the drive is balanced; beyond it, the Coulomb level
     assert f.tolist() == pytest.approx([3.0, -6.5, 4.0, 4.0 + 1.0, -6.0 - 2.0])
-    assert fl.stribeck_level(0.0, 4.0, 6.0, 0.002) == 6.0
-    assert fl.stribeck_level(0.002, 4.0, 6.0, 0.002) == pytest.approx(4.0 + 2.0 / math.e)
+    assert fx.stribeck_level(0.0, 4.0, 6.0, 0.002) == 6.0
+    assert fx.stribeck_level(0.002, 4.0, 6.0, 0.002) == pytest.approx(4.0 + 2.0 / math.e)
     assert fl.pressure_level(5e5, 2.0, 1.2e-5) == pytest.approx(8.0)
     assert fl.measured_friction(160.0, 3e5, 5e-4, 1.0) == pytest.approx(9.0)
 

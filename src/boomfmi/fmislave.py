@@ -84,8 +84,8 @@ def output(name, start, unit, description, depends=(), min=None, max=None, type=
 
 
 # -- physical bounds of the declared maxima ------------------------------------------------
-#: The longest stroke an FMU accepts [m] (``physics.params.L_MAX``): every piston
-#: position declares it as its max, since x <= L <= L_MAX.
+# The longest stroke an FMU accepts [m] is physics.params.L_MAX: every piston position
+# declares it as its max, since x <= L <= L_MAX.
 #: The highest supply pressure an FMU accepts, absolute [Pa]: 10 bar gauge, the rating of
 #: the rig's valve and cylinder and the range of its 0 to 10 bar gauge transducers
 #: (``reference-rig.md`` supplies 6 bar).  The exhaust lies below the supply, so P_e too.

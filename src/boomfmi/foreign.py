@@ -452,9 +452,7 @@ def import_recording(path, out, opts: dict, P_atm: float = reference_rig.P_atm) 
 
 def _at_source(e: RecordingError, table: ForeignTable) -> RecordingError:
     """The recording reader's error on the converted file, placed in the foreign file."""
-    where = str(e.path) + (f", line {e.row}" if e.row is not None else "") + (
-        f", column {e.column!r}" if e.column is not None else "")
-    message = str(e)[len(where) + 2:]
+    message = e.message
     row = None
     if e.row is not None and 2 <= e.row < len(table.lines) + 2:
         row = int(table.lines[e.row - 2])

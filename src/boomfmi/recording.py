@@ -52,7 +52,7 @@ class RecordingError(ValueError):
     ``column`` locate the fault where it has a place."""
 
     def __init__(self, path, message: str, row: int | None = None, column: str | None = None):
-        self.path, self.row, self.column = Path(path), row, column
+        self.path, self.row, self.column, self.message = Path(path), row, column, message
         where = str(path)
         if row is not None:
             where += f", line {row}"

@@ -49,6 +49,7 @@ import numpy as np
 
 from ..foreign import increasing_time, read_with
 from ..physics import friction_laws as fl
+from ..physics.effects import stribeck_level, stribeck_weight
 from ..physics import reference_rig
 from ..recording import RecordingError
 from .signals import SMOOTH, running_median, stroke_ids, velocity
@@ -301,7 +302,7 @@ class _StribeckDesign:
         self.T = T
 
     def solve(self, v_s: float):
-        w = self.s * fl.stribeck_level(self.v, 0.0, 1.0, v_s)          # sign(v) exp(-|v|/v_s)
+        w = self.s * stribeck_weight(self.v, v_s)          # sign(v) exp(-|v|/v_s)
         W = np.column_stack([np.where(self.v > 0, w, 0.0), np.where(self.v < 0, w, 0.0)])
         G = np.empty((6, 6))
         G[:4, :4] = self.GF
@@ -400,8 +401,8 @@ def levels(law: str, params: dict, v, p):
         return params["F_s_pos"], params["F_s_neg"], params["F_d"], params["F_d"]
     if law == "stribeck":
         return (params["F_s_pos"], params["F_s_neg"],
-                fl.stribeck_level(v, params["F_d"], params["F_s_pos"], params["v_s"]),
-                fl.stribeck_level(v, params["F_d"], params["F_s_neg"], params["v_s"]))
+                stribeck_level(v, params["F_d"], params["F_s_pos"], params["v_s"]),
+                stribeck_level(v, params["F_d"], params["F_s_neg"], params["v_s"]))
     F_d = fl.pressure_level(p, params["F_d0"], params["c_d"])
     return (fl.pressure_level(p, params["F_s0_pos"], params["c_s_pos"]),
             fl.pressure_level(p, params["F_s0_neg"], params["c_s_neg"]), F_d, F_d)

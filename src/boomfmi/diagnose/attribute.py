@@ -329,7 +329,7 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
         # than the noise (the baseline's spread no longer counts: the best's fit has
         # moved the model off the baseline already)
         if best.shrink < MIN_SHRINK or sum(best.holdout.values()) > NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR:
-            pair = _pairs(cands, values, fit_recs, hold_recs, before, threshold, workers)
+            pair = _pairs(cands, values, fit_recs, hold_recs, before, workers)
         if pair is not None:
             pair.score = round(min(1.0, pair.shrink / MIN_SHRINK), 4)
             verdict = pair.name.split("+")
@@ -343,7 +343,7 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     return att
 
 
-def _pairs(cands, values, fit_recs, hold_recs, before, threshold, workers):
+def _pairs(cands, values, fit_recs, hold_recs, before, workers):
     """The best pair of effects, where no single one explains the gap or the best leaves
     one beyond the noise.  Pairs are drawn among the PAIR_POOL candidates that helped
     most on their own (not only beside the best: two effects may each explain too

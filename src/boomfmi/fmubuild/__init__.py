@@ -209,8 +209,9 @@ def shim_compiler(platform: str) -> str | None:
     return None
 
 
-def compile_shim(out: Path, platform: str = "linux64") -> Path:
-    """Compile the status shim for ``platform`` with the FMI 2.0 headers that fmpy ships."""
+def compile_shim(out: Path, platform: str = "linux64", source: Path = SHIM_SOURCE) -> Path:
+    """Compile the status shim (``source``: FMI 2.0's by default) for ``platform`` with
+    the FMI headers that fmpy ships."""
     import fmpy
     include = Path(fmpy.__file__).parent / "c-code"
     cc = shim_compiler(platform)
@@ -219,10 +220,10 @@ def compile_shim(out: Path, platform: str = "linux64") -> Path:
         raise BuildError(f"no C compiler ({names}) on PATH: needed for the FMUs' {platform} status shim")
     _, _, flags, libs = SHIM_PLATFORMS[platform]
     cmd = [cc, "-shared", *flags, "-O2", "-Wall", "-Wextra", "-Werror", f"-I{include}",
-           "-o", str(out), str(SHIM_SOURCE), *libs]
+           "-o", str(out), str(source), *libs]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
-        raise BuildError(f"compiling {SHIM_SOURCE.name} for {platform} failed:\n{proc.stderr}")
+        raise BuildError(f"compiling {Path(source).name} for {platform} failed:\n{proc.stderr}")
     return out
 
 

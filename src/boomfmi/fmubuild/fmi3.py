@@ -38,14 +38,13 @@ import importlib
 import importlib.util
 import re
 import shutil
-import subprocess
 import sys
 import tempfile
 import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from . import BuildError, bundle_name, complete_model_description, stage, validate
+from . import BuildError, bundle_name, compile_shim, complete_model_description, stage, validate
 
 #: The FMUs built for FMI 3.0 (not the hardware bridge).
 FMI3_NAMES = ("valve", "cylinder", "boom_load", "force_estimator")
@@ -339,20 +338,12 @@ def shim_source(header: str) -> str:
 
 
 def compile_shim3(out: Path) -> Path:
-    """Generate and compile the FMI 3.0 status shim with the headers that fmpy ships."""
+    """Generate the FMI 3.0 status shim from the FMI 3.0 headers that fmpy ships, and
+    compile it (:func:`boomfmi.fmubuild.compile_shim`)."""
     import fmpy
-    include = Path(fmpy.__file__).parent / "c-code"
     source = out.with_suffix(".c")
-    source.write_text(shim_source((include / "fmi3FunctionTypes.h").read_text()))
-    cc = shutil.which("cc") or shutil.which("gcc")
-    if cc is None:
-        raise BuildError("no C compiler (cc or gcc) on PATH: needed for the FMUs' status shim")
-    cmd = [cc, "-shared", "-fPIC", "-O2", "-Wall", "-Wextra", "-Werror", f"-I{include}",
-           "-o", str(out), str(source), "-ldl"]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode != 0:
-        raise BuildError(f"compiling the FMI 3.0 status shim failed:\n{proc.stderr}")
-    return out
+    source.write_text(shim_source((Path(fmpy.__file__).parent / "c-code" / "fmi3FunctionTypes.h").read_text()))
+    return compile_shim(out, "linux64", source)
 
 
 def _rewrite3(fmu: Path, model_description: bytes, model_identifier: str, shim: Path) -> None:

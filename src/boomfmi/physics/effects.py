@@ -114,13 +114,19 @@ def stribeck_weight(v, v_s: float):
     return xp.exp(-xp.abs_(v) / v_s)
 
 
+def stribeck_level(v, F_d, F_s, v_s: float):
+    """The sliding level [N] at speed ``v`` [m/s] on the Stribeck curve from the static
+    level ``F_s`` at rest to the Coulomb level ``F_d`` [N]: ``F_d + (F_s - F_d)
+    exp(-|v| / v_s)`` (:func:`stribeck_weight`), ``v_s`` [m/s] > 0; floats or arrays."""
+    return F_d + (F_s - F_d) * stribeck_weight(v, v_s)
+
+
 def stribeck_load(load: Load, v: float, v_s: float) -> Load:
     """The load with its Coulomb level at speed ``v`` [m/s] on the Stribeck curve
-    ``F_d + (F_s - F_d) exp(-|v| / v_s)`` (:func:`stribeck_weight`); ``v_s <= 0``
-    leaves the paper's step."""
+    (:func:`stribeck_level`); ``v_s <= 0`` leaves the paper's step."""
     if v_s <= 0.0:
         return load
-    return load._replace(F_d=load.F_d + (load.F_s - load.F_d) * stribeck_weight(v, v_s))
+    return load._replace(F_d=stribeck_level(v, load.F_d, load.F_s, v_s))
 
 
 def _cushion(mdot: float, p: float, distance: float, length: float, A_n: float, P_e: float,

@@ -13,7 +13,7 @@ two directions (``_pos`` for v > 0, ``_neg`` for v < 0, magnitudes >= 0):
 
 - ``eq9``: constant static ``F_s`` and Coulomb ``F_d`` levels;
 - ``stribeck``: the sliding level falls from the static level to the Coulomb level as
-  the speed rises, ``F_d + (F_s - F_d) exp(-|v| / v_s)`` (``effects.stribeck_weight``,
+  the speed rises, ``F_d + (F_s - F_d) exp(-|v| / v_s)`` (``effects.stribeck_level``,
   the form of the model's ``stribeck_friction``);
 - ``pressure``: the levels grow with the chamber pressure,
   ``F_d(p) = F_d0 + c_d p`` and ``F_s(p) = F_s0 + c_s p``, ``p`` gauge.
@@ -24,7 +24,6 @@ they choose.
 from __future__ import annotations
 
 from . import _xp as xp
-from .effects import stribeck_weight
 from .load import friction_force
 from .params import Load
 
@@ -50,18 +49,11 @@ def seal_friction(v, F_drive, F_s_pos, F_s_neg, F_d_pos, F_d_neg, K_v_pos, K_v_n
     At rest with ``-F_s_neg <= F_drive <= F_s_pos`` it balances the drive; otherwise it
     is the Coulomb level of the direction of motion (of the drive at breakaway), and
     ``K_v v`` with the direction's ``K_v`` [N s/m] adds while sliding.  Levels may be
-    arrays (a level per sample: :func:`pressure_level`, :func:`stribeck_level`)."""
+    arrays (a level per sample: :func:`pressure_level`, ``effects.stribeck_level``)."""
     up = (v > 0) | ((v == 0) & (F_drive > 0))
     pos = friction_force(v, F_drive, 0.0, Load(K_v=K_v_pos, F_s=F_s_pos, F_d=F_d_pos))
     neg = friction_force(v, F_drive, 0.0, Load(K_v=K_v_neg, F_s=F_s_neg, F_d=F_d_neg))
     return xp.where(up, pos, neg) + directional(v, K_v_pos, K_v_neg) * v
-
-
-def stribeck_level(v, F_d, F_s, v_s):
-    """The sliding level [N] at speed ``v`` [m/s] on the Stribeck curve from the static
-    level ``F_s`` at rest to the Coulomb level ``F_d`` [N]: ``F_d + (F_s - F_d)
-    exp(-|v| / v_s)``, ``v_s`` [m/s] > 0."""
-    return F_d + (F_s - F_d) * stribeck_weight(v, v_s)
 
 
 def pressure_level(p, level_0, c):
