@@ -55,7 +55,7 @@ from boomfmi.experiments import manoeuvres, paper_multistep, random_steps, sine_
 from boomfmi.recording import read_recording  # noqa: E402
 
 EFFECTS = ("valve_dynamics", "valve_deadband", "heat_transfer", "piston_leakage",
-           "stribeck_friction", "end_cushioning", "sensor_lag")
+           "stribeck_friction", "end_cushioning", "sensor_lag", "pressure_friction")
 LOAD = ("K_v", "F_s", "F_d", "F_L", "M")
 DURATION = 10.0
 DESIGNS = {
@@ -105,6 +105,10 @@ def effect_params(name: str, form: str, s: float, rng, load: dict) -> dict:
         if form == "first_order":
             return {"tau": _log(2e-4, 0.02, s)}
         return {"delay": _log(2e-4, 0.01, s), "tau": _log(2e-4, 0.01, s)}
+    if name == "pressure_friction":
+        if form == "linear":
+            return {"c": _log(0.003, 0.25, s), "asym": u(0.8, 1.25)}
+        return {"c_p": _log(0.003, 0.3, s), "c_r": _log(0.003, 0.3, s) * u(0.3, 1.0)}
     raise ValueError(name)
 
 
@@ -168,8 +172,9 @@ def make_recordings(case: dict, cache: Path) -> dict:
     d = cache / f"case{case['case']:03d}_{case['seed']}"
     meta = d / "meta.json"
     info = json.loads(meta.read_text()) if meta.exists() else {}
-    if "difference_fit" in info and info.get("scoring") == SCORING:
+    if "difference_fit" in info and info.get("scoring") == SCORING and info.get("case") == case:
         return info
+    info = {"case": case}
     d.mkdir(parents=True, exist_ok=True)
     fit_p = DESIGNS[case["fit_design"]](case["seed"])
     hold_p = DESIGNS[case["hold_design"]](case["seed"] + 500)

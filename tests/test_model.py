@@ -72,7 +72,8 @@ def test_diagnosis_reads_its_candidates_and_fmu_options_from_the_catalogue(tmp_p
     lag_tau, lag_delay = ("tau", 2e-4, 0.03, True), ("delay", 2e-4, 0.02, True)
     assert FORMS == {"heat_transfer": [[("h", 1.0, 2000.0, True)], [("n", 1.0, 1.4, False)]],
                      "piston_leakage": [[leak_C], [leak_A], [leak_C, leak_A]],
-                     "sensor_lag": [[lag_tau], [lag_tau, lag_delay]]}
+                     "sensor_lag": [[lag_tau], [lag_tau, lag_delay]],
+                     "pressure_friction": [[(c, 1e-7, 2e-4, True)] for c in ("c_sum", "c_max", "c_diff")]}
     data = run_offline({"seed": 1}, random_steps(1, duration=0.2), 0.2)
     rec = Recording(tmp_path / "r.csv", data)
     fx = {n: {p.name: p.upper for p in e.parameters} for n, e in EFFECTS.items()}
@@ -89,7 +90,7 @@ def test_options_switch_effects_on_only_when_a_switching_parameter_is_set():
     assert effects_from_options("cylinder", on) == {"piston_leakage": {"C": 0.0, "A": 1e-8},
                                                     "end_cushioning": {"length": 0.01, "A_n": 1e-7}}
     with pytest.raises(ph.ParameterError, match="not an effect"):
-        Model(effects={"pressure_friction": {}}).check()
+        Model(effects={"wall_stiction": {}}).check()
     with pytest.raises(ph.ParameterError, match="effects.valve_dynamics"):
         Model(effects={"valve_dynamics": {"width": 1.0}}).check()
 

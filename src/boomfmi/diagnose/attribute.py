@@ -55,7 +55,7 @@ import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
 from ..compare import CHANNELS, nrmse, recorded, rig_model, shrink, simulate_recording
-from ..identify.fit import identify
+from ..identify.fit import PRESSURE_COEFFICIENT, identify
 from ..identify.preprocess import lowpass, prepare
 from ..model import EFFECTS, measure
 
@@ -210,15 +210,22 @@ def _fit_and_score(args):
 
 
 def _fit_friction(name, fit_recs, hold_recs):
-    """A friction effect fitted jointly with the baseline it changes: for each value of
-    its parameter (the Stribeck velocity, on a log grid, then refined) the load is
-    identified anew with the effect in Eq. 8 and 9 (``identify.fit.identify``), and the
-    value whose identification fits the recorded velocities best is kept, with its
-    load.  A baseline identified without the effect would have absorbed part of it
-    (F_s, M) and hidden the rest."""
-    (param, lo, hi, log), = CANDIDATES[name]
+    """A friction effect fitted jointly with the baseline it changes, by the load's own
+    identification with the effect in Eq. 8 and 9 (``identify.fit.identify``).  A
+    baseline identified without the effect would have absorbed part of it (F_s, F_d,
+    M) and hidden the rest.
+
+    * stribeck_friction: for each Stribeck velocity (a log grid, then refined) the load
+      is identified anew, and the value whose identification fits the recorded
+      velocities best is kept, with its load;
+    * pressure_friction: its coefficient is one more linear term of Eq. 8, identified
+      with the load for each seal-pressure law; the law whose model fits the fit
+      recordings best is kept."""
     rig = rig_model(fit_recs[0])
     preps = [prepare(r, geometry=rig.geometry, P_atm=rig.P_atm) for r in fit_recs]
+    if name == "pressure_friction":
+        return _fit_pressure_friction(name, rig, preps, fit_recs, hold_recs)
+    (param, lo, hi, log), = CANDIDATES[name]
     def fitted(v_s):         # (how far the velocity fit misses, the load) at v_s
         res = identify(preps, rig.cylinder, rig.P_atm, valve=rig.valve, gas=rig.gas, v_s=v_s)
         return res.details.get("velocity_error", {}).get("rms_velocity_m_s", math.inf), res.values()
@@ -240,6 +247,21 @@ def _fit_friction(name, fit_recs, hold_recs):
     joint = {k: v for k, v in seen[v_s][1].items() if math.isfinite(v)}
     fx = {name: {param: v_s}}
     cost = sum(e * e for e in mean_errors(joint, fx, fit_recs, FIT_RTOL).values())
+    return name, fx, cost, mean_errors(joint, fx, hold_recs), joint
+
+
+def _fit_pressure_friction(name, rig, preps, fit_recs, hold_recs):
+    fits = []
+    for form in EFFECTS[name].forms:
+        (q,) = form
+        law = next(k for k, v in PRESSURE_COEFFICIENT.items() if v == q.name)
+        res = identify(preps, rig.cylinder, rig.P_atm, valve=rig.valve, gas=rig.gas, pressure=law)
+        found = res.values()
+        joint = {k: v for k, v in found.items() if k not in PRESSURE_COEFFICIENT.values() and math.isfinite(v)}
+        fx = {name: {q.name: float(min(max(found[q.name], q.lower), q.upper))}}
+        cost = sum(e * e for e in mean_errors(joint, fx, fit_recs, FIT_RTOL).values())
+        fits.append((cost, fx, joint))
+    cost, fx, joint = min(fits, key=lambda f: f[0])
     return name, fx, cost, mean_errors(joint, fx, hold_recs), joint
 
 

@@ -54,7 +54,10 @@ from ..physics import reference_rig
 from .preprocess import Prepared, lowpass
 
 PARAMS = ("K_v", "F_s", "F_d", "F_L", "M")
-UNITS = {"K_v": "N.s/m", "F_s": "N", "F_d": "N", "F_L": "N", "M": "kg", "A_max": "m2"}
+UNITS = {"K_v": "N.s/m", "F_s": "N", "F_d": "N", "F_L": "N", "M": "kg", "A_max": "m2",
+         "c_sum": "N/Pa", "c_max": "N/Pa", "c_diff": "N/Pa"}
+#: pressure_friction's coefficient for each seal-pressure law (``physics.effects.seal_pressure``)
+PRESSURE_COEFFICIENT = {"sum": "c_sum", "max": "c_max", "diff": "c_diff"}
 #: Relative floor of every interval's half-width (see the module's docstring).
 SYSTEMATIC = {"K_v": 0.01, "F_s": 0.03, "F_d": 0.015, "F_L": 0.005, "M": 0.03}
 
@@ -156,7 +159,7 @@ def correlation_samples(p: Prepared) -> float:
     return max(1.0, p.fs / (2.0 * p.cutoff))
 
 
-def equation_rows(r: "Motion", cutoff: float = EE_CUTOFF, v_s: float = 0.0):
+def equation_rows(r: "Motion", cutoff: float = EE_CUTOFF, v_s: float = 0.0, pressure: str | None = None):
     """Eq. 8 over the whole recording, through a state-variable filter G (zero-phase
     low-pass at ``cutoff``), as rows ``X theta = y`` in theta = (M, K_v, F_d, F_L)::
 
@@ -169,7 +172,10 @@ def equation_rows(r: "Motion", cutoff: float = EE_CUTOFF, v_s: float = 0.0):
     stop and reversal, and the filter can be slow (its noise is low) without biasing
     anything.  G[a] and G[v] are derivatives of G[x].  With a Stribeck velocity ``v_s``
     [m/s] > 0 (stribeck_friction) the sliding friction is ``F_d (1 - w) + F_s w``,
-    w = exp(-|v| / v_s) at the measured speed, and theta gains F_s (a fifth column).  Samples within the filter's
+    w = exp(-|v| / v_s) at the measured speed, and theta gains F_s (a fifth column).
+    With a seal-pressure law ``pressure`` (pressure_friction: ``"sum"``, ``"max"`` or ``"diff"``,
+    ``physics.effects.seal_pressure``) the sliding friction is ``F_d + c p_seal`` and
+    theta gains c [N/Pa] (a last column, linear as the others).  Samples within the filter's
     reach of the recording's ends or of an impact on a stop are left out (a stop's
     impulse is not in Eq. 8).  Returns ``(X, y, mask)``."""
     p, modes = r.p, r.modes
@@ -181,9 +187,12 @@ def equation_rows(r: "Motion", cutoff: float = EE_CUTOFF, v_s: float = 0.0):
     friction = modes.direction * np.cos(p.phi)
     if v_s > 0.0:
         w = fx.stribeck_weight(modes.v, v_s)
-        X = np.column_stack([ag, vg, G(friction * (1.0 - w)), G(s * np.sin(p.phi)), G(friction * w)])
+        cols = [ag, vg, G(friction * (1.0 - w)), G(s * np.sin(p.phi)), G(friction * w)]
     else:
-        X = np.column_stack([ag, vg, G(friction), G(s * np.sin(p.phi))])
+        cols = [ag, vg, G(friction), G(s * np.sin(p.phi))]
+    if pressure is not None:
+        cols.append(G(friction * r.seal(pressure)))
+    X = np.column_stack(cols)
     y = G(s * r.F_p)
     reach = int(REACH * p.fs / cutoff)
     use = np.ones(len(y), bool)
@@ -194,13 +203,14 @@ def equation_rows(r: "Motion", cutoff: float = EE_CUTOFF, v_s: float = 0.0):
 
 
 def equation_error(motions: list["Motion"], n_boot: int = 200, block: float = 0.1, seed: int = 0,
-                   cutoff: float = EE_CUTOFF, v_s: float = 0.0):
-    """Stage 1: M, K_v, F_d, F_L (and F_s, with a Stribeck velocity ``v_s``) by least
-    squares on :func:`equation_rows` of every recording; 95 % intervals from a
-    moving-block bootstrap of the rows."""
+                   cutoff: float = EE_CUTOFF, v_s: float = 0.0, pressure: str | None = None):
+    """Stage 1: M, K_v, F_d, F_L (and F_s, with a Stribeck velocity ``v_s``; and the
+    pressure coefficient, with a seal-pressure law ``pressure``) by least squares on
+    :func:`equation_rows` of every recording; 95 % intervals from a moving-block
+    bootstrap of the rows."""
     X, y = [], []
     for r in motions:
-        Xi, yi, use = equation_rows(r, cutoff, v_s)
+        Xi, yi, use = equation_rows(r, cutoff, v_s, pressure)
         X.append(Xi[use])
         y.append(yi[use])
     X, y = np.vstack(X), np.concatenate(y)
@@ -225,7 +235,8 @@ def equation_error(motions: list["Motion"], n_boot: int = 200, block: float = 0.
         boots.append(th / scale)
     boots = np.array(boots)
     lo, hi = np.percentile(boots, [2.5, 97.5], axis=0)
-    names = ("M", "K_v", "F_d", "F_L", "F_s")[:X.shape[1]]
+    names = ("M", "K_v", "F_d", "F_L") + (("F_s",) if v_s > 0.0 else ()) + \
+        ((PRESSURE_COEFFICIENT[pressure],) if pressure is not None else ())
     est = {k: _widened(k, theta[j], min(lo[j], theta[j]), max(hi[j], theta[j])) for j, k in enumerate(names)}
     residual = y - X @ theta
     return est, {"samples": int(n), "condition_number": cond,
@@ -252,6 +263,12 @@ class Motion:
     v_meas: np.ndarray     #: the measured velocity, low-passed [m/s]
     reach: int             #: samples at each run's ends left out of the velocity comparison
     L: float               #: the stroke [m]
+    P_atm: float = reference_rig.P_atm   #: the atmosphere [Pa]
+
+    def seal(self, pressure: str) -> np.ndarray:
+        """The seals' pressure [Pa] at each sample by law ``pressure`` (pressure_friction,
+        ``physics.effects.seal_pressure``), from the recorded pressures."""
+        return fx.seal_pressure(self.p.p_a_raw, self.p.p_b_raw, self.P_atm, pressure)
 
 
 def motion(p: Prepared, cyl: ph.Cylinder, P_atm: float) -> Motion:
@@ -261,46 +278,53 @@ def motion(p: Prepared, cyl: ph.Cylinder, P_atm: float) -> Motion:
     spans = [(i0, i1, d) for d in (1.0, -1.0) for i0, i1 in runs(modes.direction == d) if i1 - i0 > 3 * reach]
     spans.sort()
     return Motion(p, modes, spans, ph.piston_force(p.p_a_raw, p.p_b_raw, cyl, P_atm),
-                  lowpass(np.gradient(p.x_raw, p.t), p.fs, VE_CUTOFF), reach, cyl.L)
+                  lowpass(np.gradient(p.x_raw, p.t), p.fs, VE_CUTOFF), reach, cyl.L, P_atm)
 
 
 def _net_force(r: Motion, i0: int, i1: int, d: float, F_d: float, F_L: float,
-               F_s: float = 0.0, v_s: float = 0.0) -> np.ndarray:
+               F_s: float = 0.0, v_s: float = 0.0, c: float = 0.0, pressure: str | None = None) -> np.ndarray:
     """The force that drives a run, each sample's value the mean of it and the next
     (the force held over a sample interval, centred: a held sample would lag it).
     With ``v_s`` > 0 the Coulomb level follows the Stribeck curve at the measured
-    speed (the series-parallel form: the recursion stays linear)."""
+    speed (the series-parallel form: the recursion stays linear); with a seal-pressure
+    law ``pressure`` it rises by ``c`` [N/Pa] times the seals' recorded pressure."""
     phi = r.p.phi[i0:i1 + 1]
     level = F_d
     if v_s > 0.0:
         w = fx.stribeck_weight(r.modes.v[i0:i1 + 1], v_s)
         level = F_d * (1.0 - w) + F_s * w
+    if pressure is not None and c != 0.0:
+        level = level + c * r.seal(pressure)[i0:i1 + 1]
     F = r.F_p[i0:i1 + 1] - F_L * np.sin(phi) - d * level * np.cos(phi)
     if len(F) > i1 - i0:
         return 0.5 * (F[:-1] + F[1:])
     return np.concatenate((0.5 * (F[:-1] + F[1:]), F[-1:]))
 
 
-def _run_velocity(r: Motion, theta, v_s: float = 0.0) -> np.ndarray:
+def _run_velocity(r: Motion, theta, v_s: float = 0.0, F_s: float = 0.0, pressure: str | None = None) -> np.ndarray:
     """Stage 2's simulated velocity over every run of one recording (0 elsewhere);
-    theta = (M, K_v, F_d, F_L[, F_s])."""
+    theta = (M, K_v, F_d, F_L[, c]), c with a seal-pressure law ``pressure``."""
     M, K_v, F_d, F_L = theta[:4]
-    F_s = theta[4] if len(theta) > 4 else 0.0
+    c = theta[4] if pressure is not None else 0.0
     v = np.zeros(len(r.p.t))
     for i0, i1, d in r.spans:
-        v[i0:i1] = ph.sliding_velocity(r.modes.v[i0], _net_force(r, i0, i1, d, F_d, F_L, F_s, v_s),
+        v[i0:i1] = ph.sliding_velocity(r.modes.v[i0], _net_force(r, i0, i1, d, F_d, F_L, F_s, v_s, c, pressure),
                                        K_v, M, r.p.dt)
     return v
 
 
-def velocity_error(all_runs: list[Motion], start: dict, n_boot: int = 300, seed: int = 0, v_s: float = 0.0):
-    """Stage 2: M, K_v, F_d, F_L (and F_s, with a Stribeck velocity ``v_s``) by velocity
-    output error over every sliding run, from ``start`` (stage 1); intervals from a
-    bootstrap over the runs of the linearised fit.  Returns ``(estimates, details)``
-    or ``(None, details)`` without usable runs."""
-    names = ("M", "K_v", "F_d", "F_L")
-    held = (start["F_s"],) if v_s > 0.0 else ()     # the Stribeck curve's static end, from the starts
+def velocity_error(all_runs: list[Motion], start: dict, n_boot: int = 300, seed: int = 0, v_s: float = 0.0,
+                   pressure: str | None = None):
+    """Stage 2: M, K_v, F_d, F_L (and the pressure coefficient, with a seal-pressure
+    law ``pressure``; with a Stribeck velocity ``v_s`` the curve's static end F_s is
+    held at ``start``'s) by velocity output error over every sliding run, from
+    ``start`` (stage 1); intervals from a bootstrap over the runs of the linearised
+    fit.  Returns ``(estimates, details)`` or ``(None, details)`` without usable runs."""
+    names = ("M", "K_v", "F_d", "F_L") + ((PRESSURE_COEFFICIENT[pressure],) if pressure is not None else ())
+    F_s = start["F_s"] if v_s > 0.0 else 0.0     # the Stribeck curve's static end, from the starts
     theta0 = np.array([start[k] for k in names])
+    if pressure is not None and not theta0[4] > 0.0:
+        theta0[4] = 1e-6         # a coefficient the equation error left at or below 0: a small one
     # a start outside physics (the equation error on very little motion) is replaced:
     # K_v from its magnitude, M for a 10 ms mechanical time constant, F_d 50 N
     theta0[1] = abs(theta0[1]) or 1000.0
@@ -323,7 +347,7 @@ def velocity_error(all_runs: list[Motion], start: dict, n_boot: int = 300, seed:
 
     def residuals(z):
         theta = theta0 * np.exp(z)
-        return np.concatenate([(lowpass(_run_velocity(r, (*theta, *held), v_s), r.p.fs, VE_CUTOFF) - r.v_meas)[m]
+        return np.concatenate([(lowpass(_run_velocity(r, theta, v_s, F_s, pressure), r.p.fs, VE_CUTOFF) - r.v_meas)[m]
                                for r, m in zip(all_runs, masks)])
 
     res = least_squares(residuals, np.zeros(len(names)), diff_step=1e-4, x_scale=1.0, max_nfev=50)
@@ -392,12 +416,15 @@ def _starts(r: Motion):
 
 
 def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: float,
-                    n_grid: int = 400, v_s: float = 0.0):
+                    n_grid: int = 400, v_s: float = 0.0, pressure: str | None = None):
     """Stage 3: F_s from every start (see the module's docstring).  With a Stribeck
     velocity ``v_s`` > 0 the friction after a start falls from F_s towards F_d along
     the Stribeck curve (at the measured speed), so each candidate F_s is simulated on
-    its own.  Returns ``(Estimate or None, identified, details)``."""
+    its own.  With a seal-pressure law ``pressure`` (pressure_friction) both levels
+    rise by ``base``'s coefficient times the seals' pressure, and F_s is the level at
+    none.  Returns ``(Estimate or None, identified, details)``."""
     M, K_v, F_d, F_L = (base[k] for k in ("M", "K_v", "F_d", "F_L"))
+    c = base.get(PRESSURE_COEFFICIENT[pressure], 0.0) if pressure is not None else 0.0
     events, lower = [], 0.0
     for r in motions:
         p = r.p
@@ -406,6 +433,7 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
         # noise's peaks and see every start early)
         F_drive = ph.piston_force(p.p_a, p.p_b, cyl, P_atm) - F_L * np.sin(p.phi)
         level = F_drive / np.cos(p.phi)
+        raised = c * fx.seal_pressure(p.p_a, p.p_b, P_atm, pressure) if c else 0.0   # the seals' share
         # the largest drive force held at rest in mid-stroke (away from the last
         # samples before a start): a lower bound of F_s
         # (a rest within STOP_ZONE of the stops, or of the extremes the recording
@@ -417,9 +445,9 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
         held[:edge] = held[-edge:] = False
         if held.any():
             smooth = median_filter(level, size=int(0.02 * p.fs) | 1, mode="nearest")   # local: no reach into a start
-            lower = max(lower, float(np.max(np.abs(smooth[held]))))
+            lower = max(lower, float(np.max((np.abs(smooth) - raised)[held])))
         for j, i0, ie, d, i1 in _starts(r):
-            need = d * level[j:ie]
+            need = d * level[j:ie] - (raised[j:ie] if c else 0.0)
             rest = p.x_raw[j:max(j + 1, i0 - int(0.01 * p.fs))]
             q = _quantum(p.x_raw[j:min(len(p.x_raw), ie + int(0.05 * p.fs))])
             events.append(dict(need=need, n=ie - j, r=r, j=j, ie=ie, d=d, t=float(p.t[i0]),
@@ -456,13 +484,13 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
                     out[row, s0 + 1:] = np.cumsum(0.5 * (v[:-1] + v[1:])) * dt
             return out
         if v_s <= 0.0:
-            F_net = _net_force(r, j, ie, d, F_d, F_L)
+            F_net = _net_force(r, j, ie, d, F_d, F_L, c=c, pressure=pressure)
             ll_k = like(moved_from(range(n), [F_net] * n))
             ll = (1.0 - frac) * ll_k[np.clip(k - 1, 0, n - 1)] + frac * ll_k[k]
         else:
             # each candidate F_s its own friction history: from it at rest, falling
             # towards F_d along the Stribeck curve as the measured speed grows
-            nets = [_net_force(r, j, ie, d, F_d, F_L, g, v_s) for g in grid]
+            nets = [_net_force(r, j, ie, d, F_d, F_L, g, v_s, c, pressure) for g in grid]
             ll_late = like(moved_from(k, nets))
             ll_early = like(moved_from(np.clip(k - 1, 0, n - 1), nets))
             ll = (1.0 - frac) * ll_early + frac * ll_late
@@ -589,29 +617,32 @@ def fit_A_max(preps: list[Prepared], cyl: ph.Cylinder, valve: ph.Valve, gas: ph.
 
 def identify(preps: list[Prepared], cyl: ph.Cylinder = ph.Cylinder(), P_atm: float = reference_rig.P_atm,
              with_A_max: bool = False, valve: ph.Valve = ph.Valve(), gas: ph.Gas = ph.Gas(),
-             v_s: float = 0.0) -> FitResult:
+             v_s: float = 0.0, pressure: str | None = None) -> FitResult:
     """The sound method on prepared recordings (prepared at their rig's geometry: phi
     comes with them); see the module's docstring.  ``v_s`` > 0 [m/s]: the load
     with stribeck_friction at that Stribeck velocity (every stage with the Stribeck
-    curve; F_s from the starts before and after stage 2)."""
+    curve; F_s from the starts before and after stage 2).  ``pressure`` (``"sum"``,
+    ``"max"`` or ``"diff"``): the load with pressure_friction by that seal-pressure law, its
+    coefficient (``c_sum``, ``c_max`` or ``c_diff`` [N/Pa]) identified with the load in every
+    stage (it is one more linear term of Eq. 8)."""
     motions = [motion(p, cyl, P_atm) for p in preps]       # classified once, read by every stage
-    est, info = equation_error(motions, v_s=v_s)
+    est, info = equation_error(motions, v_s=v_s, pressure=pressure)
     details = {"equation_error": info}
     warnings = []
     values = lambda: {k: e.value for k, e in est.items()}
     if v_s > 0.0:        # F_s from the starts first: the sliding alone hardly holds it
-        F_s, identified, info3 = static_friction(motions, values(), cyl, P_atm, v_s=v_s)
+        F_s, identified, info3 = static_friction(motions, values(), cyl, P_atm, v_s=v_s, pressure=pressure)
         if F_s is not None:
             est["F_s"] = F_s
         else:
             est["F_s"] = Estimate(max(est["F_d"].value, est.get("F_s", est["F_d"]).value), (math.nan, math.nan), "N")
-    refined, info2 = velocity_error(motions, values(), v_s=v_s)
+    refined, info2 = velocity_error(motions, values(), v_s=v_s, pressure=pressure)
     details["velocity_error"] = info2
     if refined is None:
         warnings.append("too few runs of motion for the velocity fit: the load is from the equation error alone")
     else:
         est.update(refined)
-    F_s, identified, info3 = static_friction(motions, values(), cyl, P_atm, v_s=v_s)
+    F_s, identified, info3 = static_friction(motions, values(), cyl, P_atm, v_s=v_s, pressure=pressure)
     details["static_friction"] = dict(info3, identified=bool(identified))
     if F_s is None:
         warnings.append("no start of motion from rest: F_s cannot be identified; F_d is used in its place")
@@ -632,5 +663,5 @@ def identify(preps: list[Prepared], cyl: ph.Cylinder = ph.Cylinder(), P_atm: flo
         if k != "F_s" and not e.relative_halfwidth < 0.5:
             warnings.append(f"the data cannot identify {k}: its 95 % interval "
                             f"[{e.ci95[0]:.4g}, {e.ci95[1]:.4g}] {e.unit} is wider than half its value")
-    ordered = {k: est[k] for k in (*PARAMS, "A_max") if k in est}
+    ordered = {k: est[k] for k in (*PARAMS, "A_max", *PRESSURE_COEFFICIENT.values()) if k in est}
     return FitResult("fit", ordered, warnings, details)

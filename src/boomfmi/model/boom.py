@@ -209,7 +209,7 @@ class Boom:
         """The load's parameters at speed ``v`` [m/s] and pressures [Pa] (``friction``
         stage; without such an effect, ``load``)."""
         for apply, q in self.friction_effects:
-            load = apply(load, v, p_a, p_b, q)
+            load = apply(load, v, p_a, p_b, q, self.model)
         return load
 
     def step_load(self, x: float, v: float, dt: float, p_a: float, p_b: float, f_ext: float,

@@ -102,9 +102,15 @@ def _leak(m_a, m_b, s_a, s_b, p_a, p_b, x, q, model):
     return m_a - leak, m_b + leak, s_a, s_b
 
 
-# friction: (load, v, p_a, p_b, params) -> load
-def _stribeck(load, v, p_a, p_b, q):
+# friction: (load, v, p_a, p_b, params, model) -> load; the effects of this stage commute
+# (the Stribeck curve runs between levels that the seals' pressure raises alike)
+def _stribeck(load, v, p_a, p_b, q, model):
     return fx.stribeck_load(load, v, q["v_s"])
+
+
+def _pressure_friction(load, v, p_a, p_b, q, model):
+    return fx.pressure_friction_load(load, p_a, p_b, model.P_atm, q.get("c_sum", 0.0), q.get("c_max", 0.0),
+                                     q.get("c_diff", 0.0))
 
 
 def _p(name, unit, lower, upper, log, option, description, **kw):
@@ -155,6 +161,19 @@ EFFECTS = {e.name: e for e in (
            "within length of a chamber's end, its outflow also passes the cushion needle "
            "(area A_n, to the exhaust) in series with the valve; inflow passes freely",
            _cushion),
+    Effect("pressure_friction", "boom_load", "friction",
+           ((_p("c_sum", "N/Pa", 1e-7, 2e-4, True, "c_friction_sum",
+                "pressure_friction: rise of the static and Coulomb friction per pascal of the chambers' "
+                "summed gauge pressure; 0: off"),),
+            (_p("c_max", "N/Pa", 1e-7, 2e-4, True, "c_friction_max",
+                "pressure_friction: rise of the static and Coulomb friction per pascal of the higher "
+                "chamber's gauge pressure; 0: off"),),
+            (_p("c_diff", "N/Pa", 1e-7, 2e-4, True, "c_friction_diff",
+                "pressure_friction: rise of the static and Coulomb friction per pascal of pressure "
+                "difference across the piston; 0: off"),)),
+           "the seals pressed by the pressure they hold: F_s and F_d both grow by c_sum times the "
+           "chambers' summed gauge pressure (the real friction tests' law), by c_max times the higher "
+           "chamber's, or by c_diff times the pressure difference across the piston, whichever fits", _pressure_friction),
     Effect("sensor_lag", "hardware_bridge", "measurement",
            ((_TAU_SENSOR,),
             (_TAU_SENSOR, _p("delay", "s", 2e-4, 0.02, True, "delay_sensor",
@@ -163,7 +182,7 @@ EFFECTS = {e.name: e for e in (
 )}
 
 #: the effects.md names that have no entry yet, with why (checked by the tests)
-PENDING = {"pressure_friction": "issue 18: its form is chosen on the real friction measurements"}
+PENDING: dict = {}
 
 
 def of_fmu(fmu: str) -> Tuple[Effect, ...]:

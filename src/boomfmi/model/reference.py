@@ -93,7 +93,13 @@ class StickSlip:
     def forces(self, y, f_ext: float):
         """(drive force [N], static friction level ``F_s cos(phi)`` [N]) in state ``y``."""
         b = self.boom
-        return b.drive_force(y[0], y[1], y[2], f_ext), b.load.F_s * math.cos(ph.phi_from_x(y[2], b.geometry))
+        return b.drive_force(y[0], y[1], y[2], f_ext), self._load(y).F_s * math.cos(ph.phi_from_x(y[2], b.geometry))
+
+    def _load(self, y) -> ph.Load:
+        """The load's levels at rest in state ``y`` (the friction effects at the
+        chambers' pressures: pressure_friction raises them)."""
+        b = self.boom
+        return b.load_at(b.load, 0.0, y[0], y[1]) if b.friction_effects else b.load
 
     def next_mode(self, y, f_ext: float) -> int:
         """The mode from rest: the piston breaks away when the drive exceeds the static
@@ -106,7 +112,7 @@ class StickSlip:
         if (s > 0 and y[2] >= self.L) or (s < 0 and y[2] <= 0.0):
             return 0
         c = math.cos(ph.phi_from_x(y[2], self.boom.geometry))
-        if s * (F - s * self.boom.load.F_d * c) <= 0.0:
+        if s * (F - s * self._load(y).F_d * c) <= 0.0:
             return 0
         return s
 

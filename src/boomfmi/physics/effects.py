@@ -129,6 +129,57 @@ def stribeck_load(load: Load, v: float, v_s: float) -> Load:
     return load._replace(F_d=stribeck_level(v, load.F_d, load.F_s, v_s))
 
 
+def seal_pressure(p_a, p_b, P_atm: float, form: str = "sum"):
+    """The pressure [Pa] that presses the seals against barrel and rod
+    (pressure_friction; floats or arrays of absolute pressures [Pa]):
+
+    * ``"sum"``: the chambers' summed gauge pressure ``(p_a - P_atm) + (p_b - P_atm)``
+      (a chamber below the atmosphere counting 0), each seal lip pressed by the
+      chamber it holds (the law the real friction tests
+      chose, ``docs/real-data.md``: one chamber charged, the Coulomb and static levels
+      growing linearly with its gauge pressure, alike in both directions);
+    * ``"max"``: the higher chamber's gauge pressure ``max(p_a, p_b) - P_atm``, one
+      double-acting seal pressed by the side that loads it;
+    * ``"diff"``: the pressure difference across the piston ``|p_a - p_b|``, a seal
+      pressed by the net force on it.
+
+    With one chamber at the atmosphere the three agree, which is all a single-chamber
+    friction test can show; recordings of the boom, where both chambers are charged,
+    tell them apart."""
+    if form == "sum":
+        return xp.maximum(p_a - P_atm, 0.0) + xp.maximum(p_b - P_atm, 0.0)
+    if form == "max":
+        return xp.maximum(xp.maximum(p_a, p_b) - P_atm, 0.0)
+    if form == "diff":
+        return xp.abs_(p_a - p_b)
+    raise ValueError(f"seal_pressure: unknown form {form!r} (sum, max or diff)")
+
+
+def pressure_friction_load(load: Load, p_a: float, p_b: float, P_atm: float, c_sum: float = 0.0,
+                           c_max: float = 0.0, c_diff: float = 0.0) -> Load:
+    """The load with its static and Coulomb levels raised by the seals' pressure
+    (pressure_friction, the real data's law, ``docs/real-data.md``)::
+
+        F_s(p) = F_s + c_sum p_sum + c_max p_max + c_diff |p_a - p_b|
+        F_d(p) = F_d + c_sum p_sum + c_max p_max + c_diff |p_a - p_b|
+        p_sum = (p_a - P_atm)+ + (p_b - P_atm)+,   p_max = (max(p_a, p_b) - P_atm)+
+
+    ``c_sum``, ``c_max``, ``c_diff`` [N/Pa] >= 0 (an effective contact area times a friction
+    coefficient; the real seals of 25 mm bore: 0.2 to 1.7 N/bar, 2e-6 to 1.7e-5 N/Pa);
+    the paper's Eq. 9 otherwise unchanged (the levels times cos(phi)); see
+    :func:`seal_pressure`."""
+    dF = 0.0
+    if c_sum > 0.0:
+        dF += c_sum * seal_pressure(p_a, p_b, P_atm, "sum")
+    if c_max > 0.0:
+        dF += c_max * seal_pressure(p_a, p_b, P_atm, "max")
+    if c_diff > 0.0:
+        dF += c_diff * seal_pressure(p_a, p_b, P_atm, "diff")
+    if dF == 0.0:
+        return load
+    return load._replace(F_s=load.F_s + dF, F_d=load.F_d + dF)
+
+
 def _cushion(mdot: float, p: float, distance: float, length: float, A_n: float, P_e: float,
              gas: Gas):
     """The spear's engagement g [1] and the needle's flow into the chamber [kg/s] and its

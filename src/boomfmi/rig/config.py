@@ -21,6 +21,8 @@ heat_transfer       h_w      wall coefficient [W/(m^2 K)]    40        10 .. 150
 piston_leakage      A_leak   seal leak orifice area [m^2]    2e-8      1e-8 .. 5e-8
 stribeck_friction   v_s      Stribeck velocity [m/s]         0.01      0.002 .. 0.03
                     F_brk    breakaway force [N]             140       F_d .. 250
+pressure_friction   k_piston piston seal's rise [N/Pa]      2.5e-5    5e-6 .. 6e-5
+                    k_rod    rod seal's rise [N/Pa]         1e-5      0 .. 3e-5
 end_cushioning      l_c      cushion length [m]              0.012     0.005 .. 0.015
                     A_n      needle-valve area [m^2]         5e-8      2e-8 .. 3e-7
                     w        spigot entry chamfer [m]        0.001     0.0005 .. 0.003
@@ -48,6 +50,9 @@ direction):
 * stribeck_friction: ``F_d + (F_brk - F_d) / (1 + (v/v_s)^2)`` times cos(phi), viscous
   K_v v kept, the stick test at F_brk cos(phi).  At 4 V the piston breaks away 4 ms
   later at 0.4 bar more; at speed, friction is back at F_d.
+* pressure_friction: static and Coulomb levels both raised by ``k_piston`` times the
+  higher chamber's gauge pressure plus ``k_rod`` times chamber B's (on F_brk too, with
+  stribeck_friction).  At 6 bar in chamber B: 21 N more friction, a quarter of F_d.
 * end_cushioning: over the last l_c of stroke the exhausting chamber's outflow passes
   the needle A_n in series with the valve port (``1/A^2 = 1/A_v^2 + g/A_n^2``).  The
   exhaust pressure peaks at about 0.7 bar gauge (extending) or 1 bar (retracting) at
@@ -105,6 +110,7 @@ EFFECTS = {
     "heat_transfer": {"h_w": 40.0, "A_w0": 0.01, "T_s": reference_rig.T},
     "piston_leakage": {"A_leak": 2e-8},
     "stribeck_friction": {"v_s": 0.01, "F_brk": 140.0},
+    "pressure_friction": {"k_piston": 2.5e-5, "k_rod": 1e-5},
     "end_cushioning": {"l_c": 0.012, "A_n": 5e-8, "w": 0.001},
     "sensor_lag": {"delay": 0.003, "tau": 0.005},
 }
@@ -115,6 +121,7 @@ EFFECT_RANGES = {
     "heat_transfer": {"h_w": (10.0, 150.0), "A_w0": (0.003, 0.03), "T_s": (283.0, 313.0)},
     "piston_leakage": {"A_leak": (1e-8, 5e-8)},
     "stribeck_friction": {"v_s": (0.002, 0.03), "F_brk": (reference_rig.F_d, 250.0)},
+    "pressure_friction": {"k_piston": (5e-6, 6e-5), "k_rod": (0.0, 3e-5)},
     "end_cushioning": {"l_c": (0.005, 0.015), "A_n": (2e-8, 3e-7), "w": (0.0005, 0.003)},
     "sensor_lag": {"delay": (0.001, 0.005), "tau": (0.002, 0.010)},
 }
@@ -218,6 +225,9 @@ def _check_effect(name: str, q: dict, load, cyl) -> None:
         _require(f"{key}.v_s", q["v_s"] > 0.0, "must be > 0 m/s")
         _require(f"{key}.F_brk", q["F_brk"] >= load.F_d,
                  f"must be >= the Coulomb force F_d = {load.F_d:g} N")
+    elif name == "pressure_friction":
+        _require(f"{key}.k_piston", q["k_piston"] >= 0.0, "must be >= 0 N/Pa")
+        _require(f"{key}.k_rod", q["k_rod"] >= 0.0, "must be >= 0 N/Pa")
     elif name == "end_cushioning":
         _require(f"{key}.l_c", 0.0 < q["l_c"] <= 0.5 * cyl.L, f"must lie in (0, {0.5 * cyl.L:g}] m")
         _require(f"{key}.A_n", q["A_n"] > 0.0, "must be > 0")

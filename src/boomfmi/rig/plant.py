@@ -50,7 +50,7 @@ from .config import RigConfig, load_config, model_parameters
 from .truth import (chamber_temperature, chamber_wall_areas, cushion_engagement,
                     cushion_exhaust_area, first_order_coefficient, overlap_command,
                     piston_leak_flows, quantise, ramp_force, spool_step, spool_transition,
-                    spring_contact_force, stribeck_load, thermal_equivalent_flow,
+                    seal_friction_load, spring_contact_force, stribeck_load, thermal_equivalent_flow,
                     vibration_force, wall_heat_flow)
 
 #: Longest internal substep [s].  0.1 ms: the load moves under the pressures at the
@@ -113,6 +113,7 @@ class VirtualRig:
         self._heat = fx.get("heat_transfer")
         self._leakage = fx.get("piston_leakage")
         self._stribeck = fx.get("stribeck_friction")
+        self._seal_friction = fx.get("pressure_friction")
         self._cushion = fx.get("end_cushioning")
         self._lag = fx.get("sensor_lag")
         self._shaped = self._spool is not None or self._deadband is not None
@@ -310,7 +311,7 @@ class VirtualRig:
         ``f`` [N] and the pressures predicted for the middle of the substep from the
         chambers' inflows ``flows`` (a second-order coupling: pressures from the
         substep's start would delay every start of motion by half a substep), with the
-        rig's own Stribeck friction (stribeck_friction)."""
+        rig's own Stribeck friction (stribeck_friction) and seal friction (pressure_friction)."""
         half = 0.5 * h
         dpa, dpb = pressure_rates(p_a, p_b, flows[0], flows[1], x, v, self._cyl, self._gas)
         p_am, p_bm = p_a + half * dpa, p_b + half * dpb
@@ -320,6 +321,9 @@ class VirtualRig:
             p_bm = 0.5 * p_b
         s = self._stribeck
         ld = stribeck_load(self._load, abs(v), s["F_brk"], s["v_s"]) if s else self._load
+        q = self._seal_friction
+        if q:
+            ld = seal_friction_load(ld, p_am, p_bm, self._P_atm, q["k_piston"], q["k_rod"])
         return self._boom.step_load(x, v, h, p_am, p_bm, f, h, ld)
 
     def _chambers(self, p_a: float, p_b: float, x0: float, x1: float, flows, h: float,

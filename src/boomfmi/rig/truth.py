@@ -73,6 +73,15 @@ Sticking is the paper's exact rule (``physics.load.slide_or_stick``) with F_s re
 by F_brk and the Coulomb level F_d replaced by F_f(|v|) frozen over each short substep
 (:func:`stribeck_load`).
 
+``pressure_friction``: each seal pressed by the pressure that loads it: the piston
+seal by the higher chamber's gauge pressure, the rod seal by chamber B's; the static
+(or breakaway) and the Coulomb levels both rise by the seals' share
+(:func:`seal_friction_load`)::
+
+    dF = k_piston max(p_a, p_b, P_atm)_gauge + k_rod max(p_b - P_atm, 0)
+    k_piston  piston seal [N/Pa]   default 2.5e-5  range 5e-6 to 6e-5
+    k_rod     rod seal [N/Pa]      default 1e-5    range 0 to 3e-5
+
 ``end_cushioning``: over the last l_c of stroke at each end the exhausting chamber's
 outflow must pass the cushion needle valve (area A_n) in series with the valve port
 (area A_v).  Two orifices in series are combined as ``1/A^2 = 1/A_v^2 + g/A_n^2``, with
@@ -215,6 +224,17 @@ def stribeck_load(load: Load, v: float, F_brk: float, v_s: float) -> Load:
     and the Coulomb level F_d by :func:`stribeck_level` at ``v`` [m/s] (F_d being the
     curve's fast limit): frozen over a short substep of ``advance_load``."""
     return Load(load.K_v, F_brk, stribeck_level(v, F_brk, load.F_d, v_s), load.F_L, load.M)
+
+
+def seal_friction_load(load: Load, p_a: float, p_b: float, P_atm: float, k_piston: float,
+                       k_rod: float) -> Load:
+    """The load with its static and Coulomb levels raised by the seals' contact force:
+    ``k_piston`` [N/Pa] times the higher chamber's gauge pressure (the piston seal is
+    pressed by the side that loads it) plus ``k_rod`` [N/Pa] times chamber B's (the
+    rod seal)."""
+    hi = p_a if p_a > p_b else p_b
+    dF = k_piston * max(hi - P_atm, 0.0) + k_rod * max(p_b - P_atm, 0.0)
+    return Load(load.K_v, load.F_s + dF, load.F_d + dF, load.F_L, load.M)
 
 
 # ------------------------------------------------------------------ heat transfer

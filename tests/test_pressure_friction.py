@@ -1,0 +1,138 @@
+"""pressure_friction: the seals' friction growing with the pressure they hold (the law the
+real friction tests chose, ``docs/real-data.md``), in the physics, the boom_load FMU,
+identification and the diagnosis's candidate."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from boomfmi.physics import Load, effects as fx, reference_rig
+from boomfmi.system import FmuInstance
+
+P = reference_rig.P_atm
+BAR = 1e5
+
+
+# ------------------------------------------------------------------- closed forms
+@pytest.mark.parametrize("form, p_a, p_b, expected", [
+    ("sum", P + 5 * BAR, P + 1 * BAR, 6 * BAR),
+    ("sum", P - 0.2 * BAR, P + 2 * BAR, 2 * BAR),       # a chamber below the atmosphere presses nothing
+    ("max", P + 5 * BAR, P + 1 * BAR, 5 * BAR),
+    ("max", P + 1 * BAR, P + 3 * BAR, 3 * BAR),
+    ("diff", P + 5 * BAR, P + 1 * BAR, 4 * BAR),
+    ("diff", P + 1 * BAR, P + 3 * BAR, 2 * BAR),
+])
+def test_seal_pressure_by_law(form, p_a, p_b, expected):
+    assert fx.seal_pressure(p_a, p_b, P, form) == pytest.approx(expected)
+    arr = fx.seal_pressure(np.array([p_a, P]), np.array([p_b, P]), P, form)
+    assert arr == pytest.approx([expected, 0.0])
+
+
+def test_seal_pressure_names_an_unknown_law():
+    with pytest.raises(ValueError, match="unknown form 'mean'"):
+        fx.seal_pressure(P, P, P, "mean")
+
+
+def test_both_levels_rise_alike_and_the_rest_is_untouched():
+    load = Load(K_v=2000.0, F_s=110.0, F_d=85.0, F_L=260.0, M=23.0)
+    out = fx.pressure_friction_load(load, P + 6 * BAR, P + 2 * BAR, P, c_sum=1e-5, c_max=2e-5, c_diff=3e-5)
+    dF = 1e-5 * 8 * BAR + 2e-5 * 6 * BAR + 3e-5 * 4 * BAR
+    assert out.F_s == pytest.approx(110.0 + dF) and out.F_d == pytest.approx(85.0 + dF)
+    assert (out.K_v, out.F_L, out.M) == (load.K_v, load.F_L, load.M)
+    assert fx.pressure_friction_load(load, P + 6 * BAR, P, P) is load
+
+
+def test_the_friction_effects_commute():
+    """The Stribeck curve runs between the levels the seals' pressure raises alike, so
+    the order the model applies them in does not matter."""
+    from boomfmi.model import Boom, Model
+    effects = {"stribeck_friction": {"v_s": 0.01}, "pressure_friction": {"c_sum": 2e-5}}
+    a = Boom(Model(effects=effects)).load_at(Model().load, 0.004, P + 5 * BAR, P + BAR)
+    b = Boom(Model(effects=dict(reversed(list(effects.items()))))).load_at(Model().load, 0.004, P + 5 * BAR, P + BAR)
+    assert a == pytest.approx(b)
+    w = math.exp(-0.4)
+    dF = 2e-5 * 6 * BAR
+    assert a.F_d == pytest.approx(reference_rig.F_d + dF + (reference_rig.F_s - reference_rig.F_d) * w)
+
+
+# -------------------------------------------------------------- the boom_load FMU
+def _rest_after(fmu, drive_share, **options):
+    """x after 0.4 s of a drive force ``drive_share`` times the paper's static level
+    beyond gravity, with 6 bar gauge in chamber A and B vented."""
+    x0 = 0.03
+    phi = math.pi - math.asin(reference_rig.h / reference_rig.a) - math.acos(
+        (reference_rig.a ** 2 + (x0 + reference_rig.l_min) ** 2 - reference_rig.b ** 2)
+        / (2 * reference_rig.a * (x0 + reference_rig.l_min)))
+    p_b = P + 2 * BAR
+    F = reference_rig.F_L * math.sin(phi) + drive_share * reference_rig.F_s * math.cos(phi)
+    p_a = P + (F + (p_b - P) * reference_rig.A_b) / reference_rig.A_a
+    with FmuInstance(fmu("boom_load")) as inst:
+        inst.initialize(parameters=dict(x0=x0, **options))
+        inst.set(p_a=p_a, p_b=p_b)
+        for _ in range(200):
+            inst.step(2e-3)
+        return inst.get("x")["x"] - x0, (p_a - P) + (p_b - P)
+
+
+def test_fmu_option_holds_a_piston_the_paper_would_move(fmu):
+    moved, p_sum = _rest_after(fmu, 1.1)
+    assert moved > 1e-3                      # 10 % beyond the static level: it slides
+    c = 0.3 * reference_rig.F_s / p_sum      # the seals add 30 % at these pressures
+    held, _ = _rest_after(fmu, 1.1, c_friction_sum=c)
+    assert held == 0.0
+    # and the option for the higher chamber's pressure alone
+    held, _ = _rest_after(fmu, 1.1, c_friction_max=0.3 * reference_rig.F_s / 6e5)
+    assert held == 0.0
+
+
+def test_fmu_rejects_a_negative_coefficient(fmu):
+    from boomfmi.system import FmuError
+    with FmuInstance(fmu("boom_load")) as inst, pytest.raises(FmuError) as err:
+        inst.initialize(parameters=dict(c_friction_sum=-1e-5))
+    assert err.value.status == 3 and "c_friction_sum" in str(err.value)
+
+
+# -------------------------------------------------------------- identification
+@pytest.fixture(scope="module")
+def seal_recordings(tmp_path_factory):
+    """The virtual rig's piston seal pressed by the higher chamber (its rod seal off, so
+    its law is the model's ``max`` law exactly), on random steps and manoeuvres."""
+    from boomfmi.experiments import manoeuvres, random_steps
+    from boomfmi.recording import read_recording, write_recording
+    from boomfmi.rig.offline import run_offline
+    d = tmp_path_factory.mktemp("seal")
+    cfg = {"seed": 3, "effects": {"pressure_friction": {"k_piston": 6e-5, "k_rod": 0.0}}}
+    recs = []
+    for name, cmd in (("a", random_steps(11, duration=10.0)), ("b", manoeuvres(12))):
+        write_recording(d / f"{name}.csv", run_offline(cfg, cmd, cmd.duration))
+        recs.append(read_recording(d / f"{name}.csv"))
+    return recs
+
+
+def test_identification_recovers_the_coefficient_with_the_load(seal_recordings):
+    from boomfmi.compare import rig_model
+    from boomfmi.identify.fit import identify
+    from boomfmi.identify.preprocess import prepare
+    rig = rig_model(seal_recordings[0])
+    preps = [prepare(r, geometry=rig.geometry, P_atm=rig.P_atm) for r in seal_recordings]
+    plain = identify(preps, rig.cylinder, rig.P_atm).values()
+    res = identify(preps, rig.cylinder, rig.P_atm, pressure="max")
+    v = res.values()
+    assert v["c_max"] == pytest.approx(6e-5, rel=0.05)
+    lo, hi = res.params["c_max"].ci95
+    assert lo <= 6e-5 <= hi
+    assert v["F_d"] == pytest.approx(reference_rig.F_d, rel=0.03)
+    assert v["F_s"] == pytest.approx(reference_rig.F_s, rel=0.05)
+    # without the law, the friction the seals add is taken for a larger Coulomb level
+    assert plain["F_d"] > 1.15 * reference_rig.F_d
+
+
+@pytest.mark.slow
+def test_diagnosis_candidate_picks_the_law_and_refits_the_load(seal_recordings):
+    from boomfmi.diagnose.attribute import _fit_friction
+    name, fx_, cost, after, joint = _fit_friction("pressure_friction", seal_recordings[:1], seal_recordings[1:])
+    assert name == "pressure_friction" and set(fx_[name]) == {"c_max"}
+    assert fx_[name]["c_max"] == pytest.approx(6e-5, rel=0.1)
+    assert joint["F_d"] == pytest.approx(reference_rig.F_d, rel=0.05)
