@@ -19,7 +19,7 @@ sys.path.insert(0, str(HERE / "src"))
 
 from boomfmi.fmubuild import BuildError, build_fmu  # noqa: E402
 
-FMU_NAMES = ("valve", "cylinder", "boom_load", "force_estimator", "hardware_bridge")
+FMU_NAMES = ("valve", "cylinder", "boom_load", "force_estimator", "hardware_bridge", "linkage")
 #: SSP archives: build/<name>.ssp from ssp/<ssd>
 SSPS = {"excavator_boom": "SystemStructure.ssd", "teleoperation": "teleoperation.ssd"}
 

@@ -6,9 +6,11 @@ cylinder angle phi (Eq. 8 to 12).  Within a step the pressures and f_ext are hel
 motion is integrated in short substeps with the exact stick/slip rule of
 ``physics.load``, and x never leaves [0, L].
 
-Unmodelled effect, off by default (``model/catalogue.py``, form in ``physics/effects.py``): ``v_s`` > 0 makes the
-Coulomb friction fall from F_s to F_d as speed rises (stribeck_friction).  The end
-cushioning acts on the exhaust air, so it is the cylinder's option.
+Unmodelled effects, off by default (``model/catalogue.py``, forms in ``physics/effects.py``): ``v_s`` > 0 makes the
+Coulomb friction fall from F_s to F_d as speed rises (stribeck_friction); ``c_friction_sum``,
+``c_friction_max`` or ``c_friction_diff`` > 0 raise F_s and F_d alike with the pressure the
+seals hold (pressure_friction).  The end cushioning acts on the exhaust air, so it is the
+cylinder's option.
 """
 import math
 

@@ -1,6 +1,7 @@
 """Named command profiles: what the operator (or a test script) sends to the valve.
 
-Each profile is a function of time returning the system inputs ``{"u": volts}``.
+Each profile is a function of time returning the system inputs ``{"u": volts}`` (the
+excavator's, at the end: ``{"u_swing": ..., "u_boom": ..., "u_arm": ..., "u_bucket": ...}``).
 ``paper_multistep`` is the paper's identification experiment (reference-rig.md):
 three periods, each starting with u = 10 V until the piston rests at x = 0, then
 u = U_i for the rest of the period, U = 1, 2.5, 4 V.
@@ -182,3 +183,257 @@ def profile(name: str) -> Callable[[float], dict]:
     if name not in PROFILES:
         raise ValueError(f"unknown experiment {name!r}; known: {', '.join(PROFILES)}")
     return PROFILES[name]()
+
+
+# -- the whole excavator (shared/spec/excavator.md) ---------------------------------------------
+#: The excavator's joints, each with its own valve: the commands are ``u_<joint>`` [V]
+#: (the linkage's ``physics.excavator.JOINTS``; the recording's ``recording.JOINTS``).
+JOINTS = ("swing", "boom", "arm", "bucket")
+#: The valve's centre [V]: the spool closes both ports (reference-rig.md).
+CENTRE = 5.0
+
+
+def held_joints(segments) -> Callable[[float], dict]:
+    """Commands to the four valves held over consecutive segments: ``[(duration [s],
+    {joint: u [V], ...}), ...]``; a joint a segment leaves out is held at the centre
+    (5 V).  Returns ``{"u_swing": V, "u_boom": V, "u_arm": V, "u_bucket": V}``."""
+    segments = [(float(d), dict(us)) for d, us in segments]
+    for d, us in segments:
+        unknown = set(us) - set(JOINTS)
+        if unknown:
+            raise ValueError(f"unknown joint {sorted(unknown)[0]!r}; the excavator's joints are {', '.join(JOINTS)}")
+        if not d > 0:
+            raise ValueError(f"a segment lasts more than 0 s, not {d!r}")
+        for j, u in us.items():
+            if not 0.0 <= u <= 10.0:
+                raise ValueError(f"u_{j} = {u!r} V lies outside 0 to 10 V")
+    starts = np.concatenate(([0.0], np.cumsum([d for d, _ in segments])[:-1]))
+    levels = [{f"u_{j}": float(us.get(j, CENTRE)) for j in JOINTS} for _, us in segments]
+
+    def profile(t: float) -> dict:
+        return dict(levels[max(0, int(np.searchsorted(starts, t, side="right")) - 1)])
+    profile.duration = float(sum(d for d, _ in segments))
+    profile.breakpoints = [float(s) for s in starts[1:]]
+    return profile
+
+
+#: The digging cycle's phases: (name, duration [s], {joint: offset from the centre [V]}).
+#: A negative offset (u below 5 V) extends the joint's cylinder, a positive one retracts
+#: it (the MPYE's routing, reference-rig.md).  Extending the swing cylinder turns the
+#: upper structure to the trench, retracting the boom's lowers the boom (as in
+#: :func:`dig`), extending the arm's pulls the arm in and extending the bucket's curls
+#: the bucket.
+DIG_CYCLE = (
+    ("rest", 0.5, {}),
+    ("swing to the trench", 1.5, {"swing": -2.0}),
+    ("boom down", 1.5, {"boom": +1.5}),
+    ("arm in", 1.5, {"arm": -2.0, "boom": +0.5}),
+    ("bucket curl", 1.0, {"bucket": -2.0}),
+    ("lift", 1.5, {"boom": -2.5}),
+    ("swing back", 1.5, {"swing": +2.0}),
+    ("dump", 1.0, {"bucket": +2.5, "arm": +1.5}),
+    ("rest", 0.5, {}),
+)
+
+
+def digging_cycle(level: float = 1.0, pace: float = 1.0) -> Callable[[float], dict]:
+    """The excavator's digging cycle (:data:`DIG_CYCLE`, 10.5 s): swing to the trench,
+    boom down, arm in (the boom following a little), bucket curl, lift, swing back and
+    dump (bucket open, arm out), from rest and back to rest at the valves' centre.
+    ``level`` scales every opening (1: 1.5 to 2.5 V from the centre), ``pace`` every
+    duration (2: twice as long).  Returns ``{"u_<joint>": V}`` for the four joints, with
+    ``.duration``, ``.breakpoints`` and ``.phases`` (name, start, stop [s])."""
+    if not 0.0 < level <= 2.0:
+        raise ValueError(f"level scales the openings: in (0, 2], not {level!r}")
+    if not pace > 0.0:
+        raise ValueError(f"pace scales the durations: > 0, not {pace!r}")
+    segments = [(d * pace, {j: CENTRE + level * off for j, off in offs.items()}) for _, d, offs in DIG_CYCLE]
+    profile = held_joints(segments)
+    starts = [0.0, *np.cumsum([d * pace for _, d, _ in DIG_CYCLE])]
+    profile.phases = [(name, float(starts[i]), float(starts[i + 1])) for i, (name, _, _) in enumerate(DIG_CYCLE)]
+    return profile
+
+
+def per_joint(profiles: dict) -> Callable[[float], dict]:
+    """Four boom-style profiles (``{"u": V}`` each) as one excavator profile: ``profiles``
+    maps each joint to its own; the duration is the shortest, the breakpoints all of
+    theirs."""
+    if set(profiles) != set(JOINTS):
+        raise ValueError(f"per_joint wants one profile for each of {', '.join(JOINTS)}, got {', '.join(profiles)}")
+    items = [(j, profiles[j]) for j in JOINTS]
+
+    def profile(t: float) -> dict:
+        return {f"u_{j}": p(t)["u"] for j, p in items}
+    profile.duration = float(min(p.duration for _, p in items))
+    profile.breakpoints = sorted({b for _, p in items for b in getattr(p, "breakpoints", ())
+                                  if b < profile.duration})
+    return profile
+
+
+def _joint_seeds(seed: int) -> list[int]:
+    """An independent seed for each joint, drawn from ``seed``."""
+    return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(seed).spawn(len(JOINTS))]
+
+
+def excavator_random_steps(seed: int = 0, duration: float = 20.0) -> Callable[[float], dict]:
+    """:func:`random_steps` on each of the four valves, each joint drawn from its own
+    seed (spawned from ``seed``), so that the joints start, reverse and stop at
+    different times: breakaways and accelerations of each joint while the others move
+    or rest, for identification per joint."""
+    return per_joint({j: random_steps(s, duration) for j, s in zip(JOINTS, _joint_seeds(seed))})
+
+
+def excavator_manoeuvres(seed: int = 0, duration: float = 20.0) -> Callable[[float], dict]:
+    """:func:`manoeuvres` on each of the four valves, each joint from its own seed: runs
+    into both ends, holds at exactly 5 V, reversals and a chirp, per joint, at
+    independent times."""
+    return per_joint({j: manoeuvres(s, duration) for j, s in zip(JOINTS, _joint_seeds(seed))})
+
+
+def excavator_excitation(seed: int = 0, duration: float = 24.0, hold=(0.2, 0.9)) -> Callable[[float], dict]:
+    """The richer excitation for identifying each joint: blocks of 1.5 to 3 s in which
+    one or two joints (drawn from ``seed``, every joint in turn at least once in each
+    round of four blocks) take random steps both ways (0.5 to 4.5 V or 5.5 to 9.5 V,
+    held ``hold`` seconds, some at exactly 5 V) while the others rest at the centre.
+    A joint moving alone separates its own friction and mass from the others'; two
+    together excite the linkage's coupling."""
+    rng = np.random.default_rng(seed)
+    segments, t = [], 0.0
+    while t < duration:
+        for lead in rng.permutation(len(JOINTS)):
+            if t >= duration:
+                break
+            moving = {JOINTS[int(lead)]}
+            if rng.random() < 0.4:
+                moving.add(JOINTS[int(rng.integers(len(JOINTS)))])
+            block_end = t + float(rng.uniform(1.5, 3.0))
+            while t < block_end:
+                d = float(rng.uniform(*hold))
+                us = {}
+                for j in sorted(moving):
+                    kind = rng.choice(3, p=[0.45, 0.4, 0.15])
+                    us[j] = float(rng.uniform(0.5, 4.5) if kind == 0 else rng.uniform(5.5, 9.5) if kind == 1 else CENTRE)
+                segments.append((d, us))
+                t += d
+            d = float(rng.uniform(0.2, 0.4))               # every joint at rest between blocks
+            segments.append((d, {}))
+            t += d
+    profile = held_joints(segments)
+    profile.duration = float(duration)
+    profile.breakpoints = [b for b in profile.breakpoints if b < duration]
+    return profile
+
+
+# -- contact scenarios of the bucket's tip -----------------------------------------------------
+class TipContact:
+    """A contact scenario with a known force on the bucket's tip [N, world frame, z up,
+    the force the environment exerts on the bucket], as the recordings' ``f_tip_x/y/z``.
+
+    ``kind`` is ``"ground"`` or ``"prescribed"``:
+
+    * ground: soil whose surface is the horizontal plane ``z = ground_z`` [m]; below it
+      the soil pushes the tip up, ``f_z = stiffness * (ground_z - z) + damping *
+      max(-v_z, 0)`` (never pulling, 0 above the surface), and drags it against its
+      horizontal velocity, ``f_xy = -friction * f_z * v_xy / max(|v_xy|, v_slip)``
+      (``v_slip`` [m/s] regularises the drag near rest);
+    * prescribed: the force is given whatever the tip does: ``force`` [N] (x, y, z)
+      from ``start`` to ``stop`` [s], reached linearly over ``ramp`` [s] and released
+      as fast (a load cell's scenario; no motion needed to know it).
+
+    :meth:`force` evaluates it; :meth:`config` is the description a rig's configuration
+    carries (plain JSON numbers)."""
+
+    KINDS = ("ground", "prescribed")
+
+    def __init__(self, name: str, kind: str, *, ground_z: float = 0.0, stiffness: float = 0.0,
+                 damping: float = 0.0, friction: float = 0.0, v_slip: float = 0.01,
+                 force=(0.0, 0.0, 0.0), start: float = 0.0, stop: float = math.inf, ramp: float = 0.0):
+        if kind not in self.KINDS:
+            raise ValueError(f"contact {name!r}: kind must be one of {', '.join(self.KINDS)}, not {kind!r}")
+        values = {"ground_z": ground_z, "stiffness": stiffness, "damping": damping, "friction": friction,
+                  "v_slip": v_slip, "start": start, "ramp": ramp}
+        for k, v in values.items():
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"contact {name!r}: {k} must be a finite number, not {v!r}")
+        for k in ("stiffness", "damping", "friction", "ramp"):
+            if values[k] < 0:
+                raise ValueError(f"contact {name!r}: {k} must be >= 0, not {values[k]!r}")
+        if not v_slip > 0:
+            raise ValueError(f"contact {name!r}: v_slip must be > 0 m/s, not {v_slip!r}")
+        force = tuple(float(f) for f in force)
+        if len(force) != 3 or not all(math.isfinite(f) for f in force):
+            raise ValueError(f"contact {name!r}: force must be three finite numbers [N], not {force!r}")
+        if not stop > start:
+            raise ValueError(f"contact {name!r}: stop ({stop!r} s) must come after start ({start!r} s)")
+        if kind == "ground" and stiffness <= 0:
+            raise ValueError(f"contact {name!r}: the ground needs a stiffness > 0 N/m")
+        self.name, self.kind = name, kind
+        self.ground_z, self.stiffness, self.damping = float(ground_z), float(stiffness), float(damping)
+        self.friction, self.v_slip = float(friction), float(v_slip)
+        self.f, self.start, self.stop, self.ramp = force, float(start), float(stop), float(ramp)
+
+    def force(self, t: float, tip, tip_velocity=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """The force on the tip [N] (x, y, z) at time ``t`` [s], the tip at ``tip`` [m]
+        moving at ``tip_velocity`` [m/s], both in the world frame."""
+        if self.kind == "prescribed":
+            if t < self.start or t > self.stop:
+                return np.zeros(3)
+            if self.ramp > 0:
+                w = min(1.0, (t - self.start) / self.ramp, (self.stop - t) / self.ramp)
+            else:
+                w = 1.0
+            return w * np.asarray(self.f)
+        z, v = float(tip[2]), np.asarray(tip_velocity, float)
+        depth = self.ground_z - z
+        if depth <= 0:
+            return np.zeros(3)
+        fz = max(0.0, self.stiffness * depth + self.damping * max(-float(v[2]), 0.0))
+        vxy = v[:2]
+        drag = -self.friction * fz * vxy / max(float(np.hypot(*vxy)), self.v_slip)
+        return np.array([drag[0], drag[1], fz])
+
+    def config(self) -> dict:
+        """The scenario as plain JSON values: a rig configuration's tip contact."""
+        if self.kind == "ground":
+            return {"type": "ground", "ground_z": self.ground_z, "stiffness": self.stiffness,
+                    "damping": self.damping, "friction": self.friction, "v_slip": self.v_slip}
+        return {"type": "prescribed", "force": list(self.f), "start": self.start,
+                "stop": None if math.isinf(self.stop) else self.stop, "ramp": self.ramp}
+
+    def __repr__(self) -> str:
+        return f"TipContact({self.name!r}, {self.config()})"
+
+
+#: The excavator's contact scenarios, each meant for :func:`digging_cycle`.  The soils'
+#: surface is the ground plane (z = 0, the boom pivot 0.20 m above it): from a mid-stroke
+#: posture the tip comes down into it while the boom goes down and the arm comes in
+#: (some 7 cm deep if nothing stopped it), where the cylinders' few tens of newtons at
+#: the tip meet the soil some 2 cm (soft) or 2 mm (hard) deep.  The prescribed push
+#: acts up and back on the tip for 4 s of the cycle's dig, as a load cell would
+#: measure it, whatever the tip does.
+CONTACTS = {
+    "soft_soil": lambda: TipContact("soft_soil", "ground", ground_z=0.0, stiffness=1500.0, damping=100.0,
+                                    friction=0.3),
+    "hard_soil": lambda: TipContact("hard_soil", "ground", ground_z=0.0, stiffness=15000.0, damping=500.0,
+                                    friction=0.5),
+    "prescribed_push": lambda: TipContact("prescribed_push", "prescribed", force=(-15.0, 5.0, 25.0),
+                                          start=3.5, stop=7.5, ramp=0.5),
+}
+
+
+def contact(name: str) -> TipContact:
+    """A named contact scenario of :data:`CONTACTS`; ValueError listing the known names."""
+    if name not in CONTACTS:
+        raise ValueError(f"unknown contact scenario {name!r}; known: {', '.join(CONTACTS)}")
+    return CONTACTS[name]()
+
+
+EXCAVATOR_PROFILES = {"digging_cycle": digging_cycle, "excavator_random_steps": excavator_random_steps,
+                      "excavator_manoeuvres": excavator_manoeuvres, "excavator_excitation": excavator_excitation}
+
+
+def excavator_profile(name: str) -> Callable[[float], dict]:
+    """A named excavator profile (``{"u_<joint>": V}``); ValueError listing the known names."""
+    if name not in EXCAVATOR_PROFILES:
+        raise ValueError(f"unknown excavator experiment {name!r}; known: {', '.join(EXCAVATOR_PROFILES)}")
+    return EXCAVATOR_PROFILES[name]()

@@ -5,6 +5,15 @@ A recording is a UTF-8, comma-separated CSV with a header row and one row per sa
 ``f_ext`` [N] and ``x`` [m]; other columns are kept.  A sidecar ``run.json`` beside
 ``run.csv`` may override reference-rig values (``{"rig": {...}}``) and carry notes.
 
+An **excavator** recording (``shared/spec/excavator.md``) has the same columns per joint
+(:data:`JOINTS`: swing, boom, arm, bucket), suffixed: ``t``, ``u_<joint>`` [V],
+``p_a_<joint>``, ``p_b_<joint>`` [Pa gauge], ``angle_<joint>`` [rad] (the boom's is
+Eq. 12's alpha, the arm's and bucket's relative to the link before, the swing's about
+z), optionally ``f_tip_x``, ``f_tip_y``, ``f_tip_z`` [N, world frame, the environment's
+force on the bucket] and ``x_<joint>`` [m].  :func:`recording_kind` tells the two
+apart by the header; a boom-only recording reads as before.  The same reader, checks
+and writer serve both.
+
 :func:`read_recording` rejects a bad file with :class:`RecordingError`, whose message
 names the file, the line (the header is line 1) and the column.  It never drops rows.
 """
@@ -22,6 +31,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .physics import Valve, reference_rig
+from .physics.excavator import JOINTS
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -32,6 +42,21 @@ REQUIRED = ("t", "u", "p_a", "p_b", "alpha")
 RIG_KEYS = ("A_max", "P_s", "P_e", "k", "R", "T", "A_a", "A_b", "L", "V_a0", "V_b0", "a", "b",
             "h", "l_min", "K_v", "F_s", "F_d", "F_L", "M", "P_atm", "supply_pressure_gauge")
 OPTIONAL = ("f_ext", "x")
+#: (``JOINTS``, the excavator's joints, are the linkage's: ``physics.excavator.JOINTS``.)
+#: An excavator recording's required columns: t, then each quantity for every joint.
+EXCAVATOR_REQUIRED = ("t",) + tuple(f"{q}_{j}" for q in ("u", "p_a", "p_b", "angle") for j in JOINTS)
+#: Its optional columns: the tip force (world frame) and each piston measured directly.
+EXCAVATOR_OPTIONAL = ("f_tip_x", "f_tip_y", "f_tip_z") + tuple(f"x_{j}" for j in JOINTS)
+#: Each kind of recording: its required and optional (numeric) columns, its valve
+#: commands (0 to 10 V), its chamber pressures (gauge, >= -P_atm) and its angles [rad].
+KINDS = {
+    "boom": {"required": REQUIRED, "optional": OPTIONAL, "commands": ("u",), "pressures": ("p_a", "p_b"),
+             "angles": ("alpha",)},
+    "excavator": {"required": EXCAVATOR_REQUIRED, "optional": EXCAVATOR_OPTIONAL,
+                  "commands": tuple(f"u_{j}" for j in JOINTS),
+                  "pressures": tuple(f"{q}_{j}" for j in JOINTS for q in ("p_a", "p_b")),
+                  "angles": tuple(f"angle_{j}" for j in JOINTS)},
+}
 #: The sidecar's top-level keys: ``rig`` and ``notes`` (recording-format.md) and
 #: ``incomplete``, the reason a recorder gives when a run ended early.
 SIDECAR_KEYS = ("rig", "notes", "incomplete")
@@ -42,7 +67,38 @@ MIN_SAMPLES = 100
 #: Sample spacing [s] a recording's t may have: the DAQ samples every 1 ms.
 DT_RANGE = (1e-5, 0.05)
 UNITS = {"t": "s", "u": "V", "p_a": "Pa (gauge)", "p_b": "Pa (gauge)", "alpha": "rad",
-         "f_ext": "N", "x": "m"}
+         "f_ext": "N", "x": "m",
+         **{f"{q}_{j}": unit for j in JOINTS for q, unit in (("u", "V"), ("p_a", "Pa (gauge)"),
+                                                            ("p_b", "Pa (gauge)"), ("angle", "rad"), ("x", "m"))},
+         "f_tip_x": "N", "f_tip_y": "N", "f_tip_z": "N"}
+#: The largest joint angle a recording may hold [rad]: beyond it, the angles are in degrees.
+MAX_ANGLE = 2 * math.pi
+
+
+def recording_kind(source) -> str:
+    """``"excavator"`` or ``"boom"``: which kind of recording ``source`` is, by its
+    header.  ``source`` is a :class:`Recording`, a path to a recording (only its header
+    row is read; :class:`RecordingError` when there is none) or its column names.  A
+    recording with any excavator column beyond ``t`` (``u_boom``, ``angle_arm``...) is
+    an excavator's, whose reader then wants all of them; any other is the boom's."""
+    if isinstance(source, Recording):
+        columns = list(source.data.columns)
+    elif isinstance(source, (str, os.PathLike)):
+        path = Path(source)
+        if not path.is_file():
+            raise RecordingError(path, "no such file")
+        try:
+            with open(path, encoding="utf-8-sig", newline="") as f:
+                first = f.readline(1 << 16)
+        except UnicodeDecodeError as e:
+            raise RecordingError(path, f"not UTF-8 text ({e.reason} at byte {e.start})") from None
+        if not first.strip():
+            raise RecordingError(path, "empty file: no header row", row=1)
+        columns = [h.strip() for h in next(csv.reader([first]))]
+    else:
+        columns = [str(c).strip() for c in source]
+    excavator = set(EXCAVATOR_REQUIRED) - {"t"}
+    return "excavator" if any(c in excavator for c in columns) else "boom"
 
 
 class RecordingError(ValueError):
@@ -70,6 +126,11 @@ class Recording:
     notes: str = ""
 
     incomplete: str = ""                         #: why the run ended early (sidecar), else ""
+
+    @property
+    def kind(self) -> str:
+        """``"boom"`` or ``"excavator"`` (:func:`recording_kind`)."""
+        return recording_kind(self)
 
     @property
     def P_atm(self) -> float:
@@ -127,9 +188,12 @@ def parse_recording(path):
     if len(header) == 1 and any(d in lines[0] for d in (";", "\t")):
         delim = ";" if ";" in lines[0] else "tab"
         raise RecordingError(path, f"the header is separated by {delim!r}, not by commas", row=1)
-    for col in REQUIRED:
+    kind = recording_kind(header)
+    spec = KINDS[kind]
+    for col in spec["required"]:
         if col not in header:
-            raise RecordingError(path, f"missing required column (the header has "
+            what = "missing required column" + (" of an excavator recording" if kind == "excavator" else "")
+            raise RecordingError(path, f"{what} (the header has "
                                        f"{', '.join(repr(h) for h in header)})", row=1, column=col)
     if len(set(header)) != len(header):
         dup = next(h for h in header if header.count(h) > 1)
@@ -137,7 +201,7 @@ def parse_recording(path):
     if len(lines) < 2:
         raise RecordingError(path, "no samples after the header", row=2)
 
-    numeric = [c for c in header if c in REQUIRED or c in OPTIONAL]
+    numeric = [c for c in header if c in spec["required"] or c in spec["optional"]]
     rows = list(csv.reader(io.StringIO(text)))[1:]
     values = {c: np.empty(len(rows)) for c in numeric}
     index = {c: header.index(c) for c in header}
@@ -166,12 +230,13 @@ def parse_recording(path):
         i = int(bad[0]) + 1
         raise RecordingError(path, f"time does not increase ({float(t[i - 1])!r} s, then {float(t[i])!r} s)",
                              row=i + 2, column="t")
-    u = values["u"]
-    bad = np.flatnonzero((u < reference_rig.u_min) | (u > reference_rig.u_max))
-    if bad.size:
-        i = int(bad[0])
-        raise RecordingError(path, f"command {float(u[i])!r} V lies outside 0 to 10 V", row=i + 2, column="u")
-    for c in ("p_a", "p_b"):
+    for c in spec["commands"]:
+        u = values[c]
+        bad = np.flatnonzero((u < reference_rig.u_min) | (u > reference_rig.u_max))
+        if bad.size:
+            i = int(bad[0])
+            raise RecordingError(path, f"command {float(u[i])!r} V lies outside 0 to 10 V", row=i + 2, column=c)
+    for c in spec["pressures"]:
         bad = np.flatnonzero(values[c] < -P_atm)
         if bad.size:
             i = int(bad[0])
@@ -253,16 +318,26 @@ def check_plausible(rec: Recording) -> None:
                                    f"rate ({DT_RANGE[0]:g} to {DT_RANGE[1]:g} s apart); is it in {unit}?",
                              column="t")
     supply = rec.rig_tuple(Valve).P_s - rec.P_atm
-    peak = max(float(np.max(np.abs(d["p_a"].to_numpy(float)))), float(np.max(np.abs(d["p_b"].to_numpy(float)))))
-    opened = bool(np.any(np.abs(d["u"].to_numpy(float) - reference_rig.u_centre) > 0.5))
-    if opened and peak < 0.02 * supply:
-        raise RecordingError(path, f"the chamber pressures peak at {peak:g} Pa gauge while the valve opens, "
-                                   f"{100 * peak / supply:.2g} % of the supply's {supply:g} Pa: are they in bar or "
-                                   f"kPa? The format wants Pa (gauge)", column="p_a")
-    if peak > 1.5 * supply + 1e5:
-        raise RecordingError(path, f"the chamber pressures reach {peak:g} Pa gauge, beyond the supply's "
-                                   f"{supply:g} Pa: a wrong unit, or set the supply in the sidecar "
-                                   f"(rig.supply_pressure_gauge)", column="p_a")
+    spec = KINDS[rec.kind]
+    for u_col, (pa, pb) in zip(spec["commands"], zip(spec["pressures"][::2], spec["pressures"][1::2])):
+        peak = max(float(np.max(np.abs(d[pa].to_numpy(float)))), float(np.max(np.abs(d[pb].to_numpy(float)))))
+        opened = bool(np.any(np.abs(d[u_col].to_numpy(float) - reference_rig.u_centre) > 0.5))
+        if opened and peak < 0.02 * supply:
+            raise RecordingError(path, f"the chamber pressures peak at {peak:g} Pa gauge while the valve opens, "
+                                       f"{100 * peak / supply:.2g} % of the supply's {supply:g} Pa: are they in "
+                                       f"bar or kPa? The format wants Pa (gauge)", column=pa)
+        if peak > 1.5 * supply + 1e5:
+            raise RecordingError(path, f"the chamber pressures reach {peak:g} Pa gauge, beyond the supply's "
+                                       f"{supply:g} Pa: a wrong unit, or set the supply in the sidecar "
+                                       f"(rig.supply_pressure_gauge)", column=pa)
+    if rec.kind == "excavator":
+        for c in spec["angles"]:
+            a = d[c].to_numpy(float)
+            bad = np.flatnonzero(np.abs(a) > MAX_ANGLE)
+            if bad.size:
+                i = int(bad[0])
+                raise RecordingError(path, f"the joint angle {float(a[i])!r} is beyond +-2 pi: the format wants "
+                                           f"radians; is it in degrees?", row=i + 2, column=c)
     if "link_ok" in d:
         held = np.flatnonzero(d["link_ok"].to_numpy(float) == 0)
         if held.size:
@@ -278,9 +353,13 @@ class RecordingWriter:
     def __init__(self, path, columns=REQUIRED, sidecar: dict | None = None):
         self.path = Path(path)
         self.columns = list(columns)
-        for c in REQUIRED:
+        kind = recording_kind(self.columns)
+        for c in KINDS[kind]["required"]:
             if c not in self.columns:
-                raise ValueError(f"a recording needs column {c!r}")
+                raise ValueError(f"a recording needs column {c!r}" + (" (an excavator's: each joint's u, p_a, "
+                                                                      "p_b and angle)" if kind == "excavator" else ""))
+        if len(set(self.columns)) != len(self.columns):
+            raise ValueError(f"a recording's columns must be distinct: {self.columns}")
         self.path.parent.mkdir(parents=True, exist_ok=True)
         if sidecar:
             self.set_sidecar(sidecar)
@@ -316,8 +395,9 @@ class RecordingWriter:
 
 
 def write_recording(path, data, sidecar: dict | None = None) -> Path:
-    """Write a whole DataFrame as a recording (the required columns first)."""
-    cols = [c for c in REQUIRED if c in data] + [c for c in data.columns if c not in REQUIRED]
+    """Write a whole DataFrame as a recording (the required columns of its kind first)."""
+    required = KINDS[recording_kind(data.columns)]["required"]
+    cols = [c for c in required if c in data] + [c for c in data.columns if c not in required]
     with RecordingWriter(path, cols, sidecar) as w:
         for row in data[cols].itertuples(index=False):
             w.write(row)

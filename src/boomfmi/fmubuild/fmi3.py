@@ -47,7 +47,7 @@ from xml.etree import ElementTree as ET
 from . import BuildError, bundle_name, compile_shim, complete_model_description, stage, validate
 
 #: The FMUs built for FMI 3.0 (not the hardware bridge).
-FMI3_NAMES = ("valve", "cylinder", "boom_load", "force_estimator")
+FMI3_NAMES = ("valve", "cylinder", "boom_load", "force_estimator", "linkage")
 #: pythonfmu3's platform folder for Linux, and the name its library gets beside the shim.
 PLATFORM = "x86_64-linux"
 INNER_SUFFIX = "_pythonfmu3.so"

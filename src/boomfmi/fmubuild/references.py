@@ -51,8 +51,23 @@ def _force_estimator() -> pd.DataFrame:
                          "p_b_measured": np.full_like(t, 1e5)})
 
 
+def _linkage() -> pd.DataFrame:
+    """The four joints from mid-stroke: boom raised, arm and bucket driven, a swing
+    pulse, and a tip force (down and back) from 0.3 to 0.4 s."""
+    t = np.arange(0.0, 0.5001, 5e-3)
+    P = reference_rig.P_atm
+    on = (t > 0.3) & (t < 0.4)
+    return pd.DataFrame({
+        "time": t,
+        "p_a_swing": P + np.where((t > 0.1) & (t < 0.25), 2e5, 0.0), "p_b_swing": np.full_like(t, P),
+        "p_a_boom": P + np.interp(t, [0, 0.1, 0.5], [2.5e5, 4e5, 4e5]), "p_b_boom": np.full_like(t, P + 1e5),
+        "p_a_arm": np.full_like(t, P + 2e5), "p_b_arm": P + np.interp(t, [0, 0.2, 0.5], [3e5, 0.0, 0.0]),
+        "p_a_bucket": np.full_like(t, P + 1.5e5), "p_b_bucket": np.full_like(t, P + 1e5),
+        "f_tip_x": np.where(on, -30.0, 0.0), "f_tip_y": np.zeros_like(t), "f_tip_z": np.where(on, -50.0, 0.0)})
+
+
 INPUTS = {"valve": _valve, "cylinder": _cylinder, "boom_load": _boom_load,
-          "force_estimator": _force_estimator}
+          "force_estimator": _force_estimator, "linkage": _linkage}
 
 
 def paths(fmu_dir: Path) -> tuple[Path, Path]:

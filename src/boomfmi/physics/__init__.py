@@ -7,6 +7,11 @@ name of that FMU's own.
 """
 from . import effects, reference_rig
 from .chamber import chamber_inflows, chamber_pressure_step, chamber_volumes, pressure_rates
+from .excavator import (JOINTS, Actuator, Excavator, Link, advance_linkage, check_excavator,
+                        coriolis, cylinder_forces, cylinder_torques, excavator_parameters,
+                        forward_kinematics, gravity, joint_angles, joint_limits, kinetic_energy,
+                        lever_arms, lumped_boom_load, mass_matrix, piston_accelerations,
+                        pistons_from_angles, potential_energy, tip_jacobian, tip_torques)
 from .force_estimation import (below_sensor_floor, measured_drive_force, motion_filter_step,
                                observed_external_force, pneumatic_stiffness, position_error_force,
                                reflected_force)
@@ -33,4 +38,8 @@ __all__ = [
     "Geometry", "Load", "Valve", "check_cylinder", "check_gas", "check_load",
     "check_valve", "ParameterError", "chamber_flows", "orifice_area", "chamber_flow_slopes",
     "mass_flow_slope", "signed_mass_flow_slope", "chamber_inflows", "sliding_acceleration",
+    "JOINTS", "Actuator", "Excavator", "Link", "advance_linkage", "check_excavator", "coriolis",
+    "cylinder_forces", "cylinder_torques", "excavator_parameters", "forward_kinematics", "gravity",
+    "joint_angles", "joint_limits", "kinetic_energy", "lever_arms", "lumped_boom_load", "mass_matrix",
+    "piston_accelerations", "pistons_from_angles", "potential_energy", "tip_jacobian", "tip_torques",
 ]

@@ -187,6 +187,9 @@ def export(replay, out, fps: float = 25.0, start: float | None = None, stop: flo
     writer = _writer(out, fps)
     width, height = _size(size)
     run = load_run(replay)
+    if run.kind != "boom":
+        raise ValueError(f"--export renders the boom's runs; {replay} is an excavator's: replay it on the page "
+                         f"(boomfmi view --replay {replay})")
     t0 = run.t[0] if start is None else max(float(start), run.t[0])
     t1 = run.t[-1] if stop is None else min(float(stop), run.t[-1])
     if not t1 > t0:

@@ -18,6 +18,11 @@ A **frame** is a dict, sent to the page as JSON::
 R is the rod's pivot on the boom and T the bucket's tip, in the boom's plane with the
 boom pivot O at the origin (``physics.linkage_points``); the page draws from these
 points and does no geometry of its own.
+
+An **excavator** run (its recording's kind, ``recording.recording_kind``) gives
+:class:`ExcavatorRun` and frames of ``"kind": "excavator"``: the whole machine's points
+in 3D from ``physics.excavator.forward_kinematics`` (see the excavator section below).
+:func:`load_run` and :func:`live_frame` tell the two apart.
 """
 from __future__ import annotations
 
@@ -29,6 +34,7 @@ import numpy as np
 import pandas as pd
 
 from ..physics import Cylinder, Geometry, linkage_points, x_from_alpha
+from ..physics import excavator
 from ..physics import reference_rig
 from ..recording import read_recording
 
@@ -67,9 +73,18 @@ class Run:
     geom: Geometry
     L: float
 
+    kind = "boom"
+
     @property
     def duration(self) -> float:
         return float(self.t[-1] - self.t[0])
+
+    @property
+    def has_truth(self) -> bool:
+        return "f_ext" in self.forces
+
+    def scene(self) -> dict:
+        return scene(self.geom, self.L)
 
     def frame(self, t: float) -> dict:
         """The frame at time ``t`` [s]: linear interpolation between samples (exact at
@@ -110,10 +125,12 @@ def points(alpha: float | None, geom: Geometry) -> dict:
     return {"R": [float(R[0]), float(R[1])], "T": list(map(float, _tip(R)))}
 
 
-def load_run(path) -> Run:
-    """Read a run file (see the module's text); raises RecordingError naming the file,
-    line and column of anything malformed."""
+def load_run(path) -> "Run | ExcavatorRun":
+    """Read a run file (see the module's text), the boom's or the excavator's; raises
+    RecordingError naming the file, line and column of anything malformed."""
     rec = read_recording(path)
+    if rec.kind == "excavator":
+        return load_excavator_run(rec)
     d: pd.DataFrame = rec.data
     geom = rec.rig_tuple(Geometry)
     L = rec.rig_tuple(Cylinder).L
@@ -136,7 +153,11 @@ def live_frame(sample: dict, geom: Geometry) -> dict:
     """A frame from one live sample: the flat mapping a co-simulation sends
     (``view.live.LiveSender``): ``t``, the model's ``alpha, x, p_a, p_b``, the machine's
     ``alpha_measured, ...``, and whichever forces it has.  A sample without the
-    machine's columns shows the model as the machine (a model-only run)."""
+    machine's columns shows the model as the machine (a model-only run).  An
+    excavator's sample (``angle_<joint>``...) gives its frame (:func:`live_excavator_frame`)."""
+    if is_excavator_sample(sample):
+        return live_excavator_frame(sample)
+
     def posture(suffix: str) -> dict | None:
         alpha = sample.get("alpha" + suffix)
         if alpha is None:
@@ -155,4 +176,229 @@ def live_frame(sample: dict, geom: Geometry) -> dict:
             **{k: sample.get(k) for k in FORCES}}
 
 
-__all__ = ["Run", "load_run", "live_frame", "scene", "points"]
+
+# -- the whole excavator ----------------------------------------------------------------------
+# An excavator run (shared/spec/excavator.md) is a recording in the excavator's columns
+# (``recording.recording_kind``): ``t``, per joint ``u_<j>, p_a_<j>, p_b_<j>, angle_<j>``,
+# optionally the true tip force ``f_tip_x/y/z``; or a model's run beside the machine,
+# the model's columns unsuffixed and the machine's suffixed ``_measured``
+# (``angle_<j>_measured``, ``p_a_<j>_measured``...), as the boom's teleoperation run,
+# with the estimated tip force ``f_tip_est_x/y/z`` (and the reflected ``f_reflect_x/y/z``).
+#
+# Its frame:
+#
+#     {"type": "frame", "kind": "excavator", "t": s,
+#      "machine": {"angle": {joint: rad}, "p_a": {joint: Pa gauge}, "p_b": {...},
+#                  "points": {name: [x, y, z] m}},
+#      "model": {... the same ...} or None,
+#      "f_tip": [N, N, N] or None, "f_tip_est": [...] or None, "f_reflect": [...] or None}
+#
+# ``points`` are ``physics.excavator.forward_kinematics``'s, in the world frame (z up):
+# the swing axis at the ground, the boom, arm and bucket pivots, the tip and each
+# cylinder's eyes; the page draws from them and does no kinematics of its own.
+EXCAVATOR_POSTURE = ("angle", "p_a", "p_b")
+#: the 3-vector forces of an excavator run: frame key -> the run's column prefix
+TIP_FORCES = {"f_tip": "f_tip", "f_tip_est": "f_tip_est", "f_reflect": "f_reflect"}
+#: m of arrow per N of tip force, on the page
+TIP_FORCE_SCALE = 0.25 / 50.0
+
+
+def _angles_of_points(p: dict) -> np.ndarray:
+    """The joint angles as the drawing shows them, from the points: the upper
+    structure's heading (swing axis to boom pivot, seen from above), the boom's
+    elevation (boom pivot to arm pivot) in the upper structure's vertical plane, and the
+    arm's and bucket's elevations relative to the link before.  The page reads its drawn
+    angles back the same way (``app.js``: ``excavatorAngles``)."""
+    axis, boom = np.asarray(p["swing_axis"], float), np.asarray(p["boom_pivot"], float)
+    heading = math.atan2(boom[1] - axis[1], boom[0] - axis[0])
+    e = np.array([math.cos(heading), math.sin(heading), 0.0])
+
+    def elevation(a, b):
+        d = np.asarray(p[b], float) - np.asarray(p[a], float)
+        return math.atan2(d[2], float(d @ e))
+    eb = elevation("boom_pivot", "arm_pivot")
+    ea = elevation("arm_pivot", "bucket_pivot")
+    ek = elevation("bucket_pivot", "tip")
+    return np.array([heading, eb, ea - eb, ek - ea])
+
+
+def _wrap(a):
+    return (np.asarray(a, float) + math.pi) % (2 * math.pi) - math.pi
+
+
+def excavator_angle_map(q_ref=None) -> list[dict]:
+    """How each joint's angle (the recording's) shows in the drawing: ``q = sign *
+    (drawn - offset)`` with the drawn angle of :func:`_angles_of_points`; found from
+    the kinematics at ``q_ref`` (the linkage's mid-stroke posture by default) and
+    checked to be the same at the joints' other postures (a revolute joint's angle is
+    its drawn angle but for the sign and the offset)."""
+    if q_ref is None:
+        q_ref = np.asarray(excavator.joint_angles(_mid_stroke()), float)
+    q_ref = np.asarray(q_ref, float)
+    g0 = _angles_of_points(excavator.forward_kinematics(q_ref))
+    out = []
+    for k, j in enumerate(excavator.JOINTS):
+        dq = np.zeros(len(q_ref))
+        dq[k] = 0.05
+        d = _wrap(_angles_of_points(excavator.forward_kinematics(q_ref + dq)) - g0)
+        sign = 1.0 if d[k] > 0 else -1.0
+        if abs(abs(d[k]) - 0.05) > 1e-6 or np.max(np.abs(np.delete(d, k))) > 1e-6:
+            raise ValueError(f"the drawing cannot show joint {j!r}: turning it by 0.05 rad turns the drawn "
+                             f"angles by {list(np.round(d, 6))}")
+        out.append({"joint": j, "sign": sign, "offset": float(g0[k] - sign * q_ref[k])})
+    return out
+
+
+def _mid_stroke() -> np.ndarray:
+    """Each piston at half its stroke [m] (the linkage's parameters)."""
+    return 0.5 * excavator.excavator_parameters().strokes
+
+
+def excavator_points(q) -> dict:
+    """The drawing's points [m, world frame] for the joint angles ``q`` (swing, boom's
+    alpha, arm, bucket), as lists; None for a posture with an angle missing."""
+    if q is None or any(v is None for v in q):
+        return None
+    return {k: [float(c) for c in v] for k, v in excavator.forward_kinematics(np.asarray(q, float)).items()}
+
+
+def excavator_scene(angle_map=None) -> dict:
+    """The fixed parts of the excavator's drawing: its joints, each cylinder's bore and
+    rod [m], the links' lengths, the ground's height (z = 0), the tip force's arrow
+    scale and how the drawn angles map to the recording's (:func:`excavator_angle_map`)."""
+    params = excavator.excavator_parameters()
+    cylinders = {j: {"bore": a.bore, "rod": a.rod} for j, a in zip(excavator.JOINTS, params.actuators)}
+    return {"kind": "excavator", "joints": list(excavator.JOINTS), "cylinders": cylinders, "ground_z": 0.0,
+            "force_scale": TIP_FORCE_SCALE,
+            "angle_map": angle_map if angle_map is not None else excavator_angle_map()}
+
+
+@dataclass
+class ExcavatorRun:
+    """An excavator run's columns as arrays: ``machine`` and ``model`` map
+    EXCAVATOR_POSTURE names to (n, 4) arrays in ``excavator.JOINTS`` order (``model`` is
+    None for a recording of the machine alone); ``forces`` maps the TIP_FORCES present
+    to (n, 3) arrays."""
+    path: Path
+    t: np.ndarray
+    machine: dict
+    model: dict | None
+    forces: dict
+    angle_map: list
+
+    kind = "excavator"
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0])
+
+    @property
+    def has_truth(self) -> bool:
+        return "f_tip" in self.forces
+
+    def scene(self) -> dict:
+        return excavator_scene(self.angle_map)
+
+    def frame(self, t: float) -> dict:
+        """The frame at time ``t`` [s]: linear interpolation between samples (exact at
+        a sample's time), the run's ends held outside it."""
+        t = min(max(float(t), float(self.t[0])), float(self.t[-1]))
+        i = min(max(int(np.searchsorted(self.t, t, side="right")) - 1, 0), len(self.t) - 1)
+        w = (t - self.t[i]) / (self.t[i + 1] - self.t[i]) if i < len(self.t) - 1 and self.t[i + 1] > self.t[i] else 0.0
+
+        def at(col: np.ndarray) -> list:
+            v = col[i] if w == 0.0 else col[i] + w * (col[i + 1] - col[i])
+            return [float(x) if math.isfinite(x) else None for x in v]
+
+        def posture(cols: dict) -> dict:
+            out = {k: dict(zip(excavator.JOINTS, at(cols[k]))) for k in EXCAVATOR_POSTURE}
+            return dict(out, points=excavator_points(list(out["angle"].values())))
+
+        forces = {k: (at(self.forces[k]) if k in self.forces else None) for k in TIP_FORCES}
+        for k, v in forces.items():
+            if v is not None and any(c is None for c in v):
+                forces[k] = None
+        return {"type": "frame", "kind": "excavator", "t": t, "machine": posture(self.machine),
+                "model": posture(self.model) if self.model is not None else None, **forces}
+
+    def history(self, t: float, window: float = 10.0, rate: float = 30.0) -> list[dict]:
+        """Frames over the ``window`` seconds before ``t``, ``rate`` per second."""
+        start = max(float(self.t[0]), t - window)
+        n = int((t - start) * rate)
+        return [self.frame(start + k / rate) for k in range(n)] + [self.frame(t)]
+
+
+def load_excavator_run(rec) -> ExcavatorRun:
+    """An excavator run from its read recording (``recording.read_recording``)."""
+    d: pd.DataFrame = rec.data
+    joints = excavator.JOINTS
+
+    def posture(suffix: str) -> dict:
+        missing = [f"{k}_{j}{suffix}" for k in EXCAVATOR_POSTURE for j in joints if f"{k}_{j}{suffix}" not in d]
+        if missing:
+            from ..recording import RecordingError
+            raise RecordingError(rec.path, "a run with the machine's columns (_measured) beside the model's needs "
+                                           "every joint's angle, p_a and p_b of both", row=1, column=missing[0])
+        return {k: np.column_stack([d[f"{k}_{j}{suffix}"].to_numpy(float) for j in joints])
+                for k in EXCAVATOR_POSTURE}
+
+    if any(f"angle_{j}_measured" in d for j in joints):
+        machine, model = posture("_measured"), posture("")
+    else:
+        machine, model = posture(""), None
+    forces = {}
+    for key, prefix in TIP_FORCES.items():
+        cols = [f"{prefix}_{a}" for a in "xyz"]
+        present = [c for c in cols if c in d]
+        if present and len(present) < 3:
+            from ..recording import RecordingError
+            raise RecordingError(rec.path, f"a tip force needs all three of {', '.join(cols)}", row=1,
+                                 column=next(c for c in cols if c not in d))
+        if present:
+            vals = np.column_stack([d[c].to_numpy() for c in cols])
+            if vals.dtype.kind not in "fiu":
+                from ..recording import RecordingError
+                raise RecordingError(rec.path, "a tip force must be numbers", row=1, column=cols[0])
+            forces[key] = vals.astype(float)
+    q0 = machine["angle"][0]
+    try:
+        angle_map = excavator_angle_map(q0)
+    except ValueError:
+        angle_map = excavator_angle_map()
+    return ExcavatorRun(Path(rec.path), d["t"].to_numpy(float), machine, model, forces, angle_map)
+
+
+def live_excavator_frame(sample: dict) -> dict:
+    """A frame from one live excavator sample (``angle_<j>``, ``p_a_<j>``... of the
+    model, ``..._measured`` of the machine, ``f_tip_<a>``, ``f_tip_est_<a>``,
+    ``f_reflect_<a>``); a sample without the machine's columns shows the model as the
+    machine."""
+    joints = excavator.JOINTS
+
+    def posture(suffix: str) -> dict | None:
+        q = [sample.get(f"angle_{j}{suffix}") for j in joints]
+        if any(v is None for v in q):
+            return None
+        out = {k: {j: sample.get(f"{k}_{j}{suffix}") for j in joints} for k in EXCAVATOR_POSTURE}
+        return dict(out, points=excavator_points(q))
+
+    machine, model = posture("_measured"), posture("")
+    if machine is None:
+        machine, model = model, None
+    if machine is None:
+        raise ValueError("a live excavator sample needs every joint's angle (angle_<joint> or angle_<joint>_measured)")
+    forces = {}
+    for key, prefix in TIP_FORCES.items():
+        v = [sample.get(f"{prefix}_{a}") for a in "xyz"]
+        forces[key] = None if any(c is None for c in v) else [float(c) for c in v]
+    return {"type": "frame", "kind": "excavator", "t": float(sample.get("t", 0.0)), "machine": machine,
+            "model": model, **forces}
+
+
+def is_excavator_sample(sample: dict) -> bool:
+    """Whether a live sample is the excavator's (it has a joint's angle)."""
+    return any(f"angle_{j}{s}" in sample for j in excavator.JOINTS for s in ("", "_measured"))
+
+
+__all__ = ["Run", "ExcavatorRun", "load_run", "live_frame", "scene", "excavator_scene", "points",
+           "excavator_points"]

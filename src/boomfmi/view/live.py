@@ -1,5 +1,11 @@
 """The live feed: a running co-simulation sends its samples to ``boomfmi view --live``.
 
+An excavator's sample has, instead of the boom's values, each joint's (``swing``,
+``boom``, ``arm``, ``bucket``) ``angle_<joint>``, ``p_a_<joint>``, ``p_b_<joint>`` (the
+model's) and ``..._measured`` (the machine's), and the tip forces ``f_tip_<a>`` (the
+rig's truth), ``f_tip_est_<a>`` and ``f_reflect_<a>`` for a = x, y, z (``frames.py``);
+it needs every joint's angle of the model or of the machine.
+
 Each datagram is ``MAGIC`` (``b"BFV1"``), one UTF-8 JSON object, and the HMAC-SHA256
 (32 bytes) of the two under the rig link's shared key (``link.protocol.load_key``: a key
 file or ``$BOOMFMI_LINK_KEY``; the feed never runs unauthenticated).  The object is a
@@ -35,6 +41,7 @@ import time
 from ..link.client import parse_address
 from ..link.protocol import MAC_SIZE, load_key, mac, verifies
 from ..physics import Geometry, ParameterError, check_geometry
+from ..physics import excavator
 
 #: the view's frame rate is capped by what the sender sends
 DEFAULT_RATE = 60.0
@@ -53,6 +60,11 @@ BOUNDS = {
     "p_a": 1e8, "p_b": 1e8, "p_a_measured": 1e8, "p_b_measured": 1e8,   # Pa gauge
     "f_est": 1e8, "f_ext": 1e8, "f_reflect": 1e8,           # N
 }
+#: the excavator's joints (the linkage's ``physics.excavator.JOINTS``) and its sample's fields
+EXCAVATOR_JOINTS = excavator.JOINTS
+BOUNDS.update({f"{q}_{j}{s}": bound for j in EXCAVATOR_JOINTS for s in ("", "_measured")
+               for q, bound in (("angle", 2 * math.pi), ("p_a", 1e8), ("p_b", 1e8))})
+BOUNDS.update({f"{f}_{a}": 1e8 for f in ("f_tip", "f_tip_est", "f_reflect") for a in "xyz"})
 MAX_TIME = 1e9                  # |t| [s]
 MAX_LENGTH = 10.0               # the longest linkage length accepted [m]
 REASONS = ("malformed", "unauthenticated", "invalid", "stale", "replayed")
@@ -131,7 +143,10 @@ def check_sample(obj) -> dict:
     for k, bound in BOUNDS.items():
         if k in obj:
             out[k] = _number(k, obj[k], bound, null=True)
-    if out.get("alpha") is None and out.get("alpha_measured") is None:
+    if any(f"angle_{j}{s}" in obj for j in EXCAVATOR_JOINTS for s in ("", "_measured")):
+        if not any(all(out.get(f"angle_{j}{s}") is not None for j in EXCAVATOR_JOINTS) for s in ("", "_measured")):
+            raise Refused("invalid", "an excavator's sample needs every joint's angle_<joint> or angle_<joint>_measured")
+    elif out.get("alpha") is None and out.get("alpha_measured") is None:
         raise Refused("invalid", "a sample needs alpha or alpha_measured")
     return out
 

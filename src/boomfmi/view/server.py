@@ -9,7 +9,8 @@ percent-encoding) a 400.  ``GET /ws`` is the WebSocket; messages are JSON:
 
 server -> page
     ``{"type": "hello", "mode": "replay" | "live", "source": str, "t0": s,
-    "duration": s or null, "scene": frames.scene(), "has_model": bool,
+    "duration": s or null, "scene": frames.scene() (the boom's) or
+    frames.excavator_scene() (``"kind": "excavator"``), "has_model": bool,
     "has_truth": bool, "rate": frames per second}``, then
     ``{"type": "history", "frames": [...]}`` (the last 10 s, for the plots), then
     ``{"type": "frame", ...}`` (``frames.py``) at ``rate`` per second while playing,
@@ -62,7 +63,7 @@ from ..link.client import parse_address
 from ..link.protocol import load_key
 from ..physics import Geometry
 from ..physics import reference_rig
-from .frames import Run, live_frame, load_run, scene
+from .frames import Run, excavator_scene, live_frame, load_run, scene
 from .live import FeedGuard, Refused, json_depth, open_datagram, strict_loads
 
 WEB = Path(__file__).resolve().parent / "web"
@@ -246,10 +247,10 @@ def _file(path: Path, content_type: str, cache: str):
     return handler
 
 
-def _hello(mode: str, source: str, t0: float, duration, geom: Geometry, L: float,
+def _hello(mode: str, source: str, t0: float, duration, the_scene: dict,
            has_model: bool, has_truth: bool) -> str:
     return json.dumps({"type": "hello", "mode": mode, "source": source, "t0": t0,
-                       "duration": duration, "scene": scene(geom, L), "has_model": has_model,
+                       "duration": duration, "scene": the_scene, "has_model": has_model,
                        "has_truth": has_truth, "rate": RATE})
 
 
@@ -417,8 +418,8 @@ async def _replay_ws(request: web.Request) -> web.StreamResponse:
 
     try:
         await ws.prepare(request)
-        await _send(ws, _hello("replay", str(run.path), float(run.t[0]), run.duration, run.geom, run.L,
-                               run.model is not None, "f_ext" in run.forces))
+        await _send(ws, _hello("replay", str(run.path), float(run.t[0]), run.duration, run.scene(),
+                               run.model is not None, run.has_truth))
         await _send(ws, player.history())
         player.advance(time.perf_counter())
         await _send(ws, player.frame())
@@ -437,7 +438,9 @@ async def _replay_ws(request: web.Request) -> web.StreamResponse:
 class LiveHub(asyncio.DatagramProtocol):
     """Receives the co-simulation's samples, signed with ``key`` (``live.py``), and
     hands their frames to every page; drops, and counts in ``dropped`` by reason, every
-    datagram that is not an authentic, fresh, new and valid sample."""
+    datagram that is not an authentic, fresh, new and valid sample.  A sample of the
+    other machine (the excavator's after the boom's, or back) starts afresh: the plots'
+    history is cleared and every page is sent a new hello with that machine's scene."""
 
     def __init__(self, source: str, key: bytes, guard: FeedGuard | None = None):
         if not key:
@@ -445,6 +448,7 @@ class LiveHub(asyncio.DatagramProtocol):
         self.source, self.key = source, key
         self.guard = guard or FeedGuard()
         self.geom = Geometry()
+        self.kind = "boom"
         self.pages: set[asyncio.Queue] = set()
         self.history: collections.deque = collections.deque()
         self.received = 0
@@ -479,6 +483,15 @@ class LiveHub(asyncio.DatagramProtocol):
         self.guard.accept(sample)
         self.geom = geom
         self.received += 1
+        kind = frame.get("kind", "boom")
+        if kind != self.kind:                        # the other machine: its scene, afresh
+            self.kind = kind
+            self.history.clear()
+            hello = self.hello()
+            for q in self.pages:
+                while not q.empty():
+                    q.get_nowait()
+                q.put_nowait(hello)
         if self.history and frame["t"] < self.history[-1]["t"]:
             self.history.clear()                     # a new run: start the plots afresh
         self.history.append(frame)
@@ -491,8 +504,10 @@ class LiveHub(asyncio.DatagramProtocol):
 
     def hello(self) -> str:
         last = self.history[-1] if self.history else None
-        return _hello("live", self.source, last["t"] if last else 0.0, None, self.geom, reference_rig.L,
-                      bool(last and last["model"] is not None), bool(last and last["f_ext"] is not None))
+        the_scene = excavator_scene() if self.kind == "excavator" else scene(self.geom, reference_rig.L)
+        truth = "f_tip" if self.kind == "excavator" else "f_ext"
+        return _hello("live", self.source, last["t"] if last else 0.0, None, the_scene,
+                      bool(last and last["model"] is not None), bool(last and last.get(truth) is not None))
 
     def summary(self) -> str:
         dropped = ", ".join(f"{k} {v}" for k, v in sorted(self.dropped.items())) or "none"

@@ -2,6 +2,9 @@
 // the model's as a ghost, the estimated force at the bucket, and live plots.
 // Frames come over the WebSocket /ws (protocol: src/boomfmi/view/server.py); the page
 // does no physics: the server sends the pivots R (rod) and T (bucket tip) per frame.
+// The whole excavator (scene.kind 'excavator', frames.py) likewise: every frame carries
+// the world points of its swing, boom, arm, bucket and cylinders (z up), drawn as they
+// come; the tip forces are 3-vectors drawn as arrows whose heads are at the tip.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import uPlot from 'uplot';
@@ -112,6 +115,9 @@ function arrow(a, f, tip, boomAngle, z) {
 }
 
 function buildScene(g) {
+  three.kind = g.kind || 'boom';
+  if (three.controls) { three.controls.dispose(); three.controls = null; }
+  if (three.kind === 'excavator') { buildExcavatorScene(g); return; }
   three.geo = g;
   const scene = new THREE.Scene();
   scene.background = new THREE.Color(0x1c2027);
@@ -146,6 +152,11 @@ function buildScene(g) {
   const host = $('scene');
   three.camera = new THREE.PerspectiveCamera(40, host.clientWidth / Math.max(1, host.clientHeight), 0.01, 20);
   three.camera.position.set(0.32, 0.12, 1.15);
+  startRenderer([0.25, 0.05, 0]);
+}
+
+function startRenderer(target) {
+  const host = $('scene');
   if (!three.renderer) {
     view.webgl = webglAvailable();
     if (view.webgl) {
@@ -159,16 +170,184 @@ function buildScene(g) {
   }
   if (three.renderer) {
     three.controls = new OrbitControls(three.camera, three.renderer.domElement);
-    three.controls.target.set(0.25, 0.05, 0);
+    three.controls.target.set(...target);
     three.controls.addEventListener('change', () => { three.dirty = true; });
     three.controls.update();
   }
   resize();
 }
 
+// -- the whole excavator ----------------------------------------------------------------------
+const TIP_ARROW_MIN = 0.5;        // N: a smaller tip force is not drawn
+const UP = new THREE.Vector3(0, 1, 0);
+
+// A mesh lying along +y from 0 to 1, placed between two world points by beamTo().
+function beam(radius, mat, box) {
+  const geo = box ? new THREE.BoxGeometry(radius * 2, 1, radius * 1.6) : new THREE.CylinderGeometry(radius, radius, 1, 16);
+  geo.translate(0, 0.5, 0);
+  return new THREE.Mesh(geo, mat);
+}
+
+function beamTo(mesh, a, b, fraction = 1) {
+  const A = new THREE.Vector3(...a), B = new THREE.Vector3(...b);
+  const d = B.clone().sub(A);
+  const length = d.length();
+  if (!(length > 1e-9)) { mesh.visible = false; return; }
+  mesh.visible = true;
+  mesh.position.copy(A);
+  mesh.quaternion.setFromUnitVectors(UP, d.normalize());
+  mesh.scale.set(1, length * fraction, 1);
+}
+
+// The drawn ends of a beam, in the world frame (what the screen shows).
+function ends(mesh) {
+  mesh.updateWorldMatrix(true, false);
+  return [mesh.localToWorld(new THREE.Vector3(0, 0, 0)), mesh.localToWorld(new THREE.Vector3(0, 1, 0))];
+}
+
+function excavatorMechanism(g, ghost) {
+  const body = material(ghost ? COLORS.ghost : COLORS.machine, ghost);
+  const steel = material(ghost ? COLORS.ghost : COLORS.steel, ghost);
+  const group = new THREE.Group();
+  const upper = new THREE.Group();                 // the upper structure, turned by the swing
+  const deck = new THREE.Mesh(new THREE.CylinderGeometry(0.09, 0.09, 0.03, 32), body);
+  deck.rotation.x = Math.PI / 2; deck.position.z = 0.135;
+  const cab = new THREE.Mesh(new THREE.BoxGeometry(0.12, 0.10, 0.08), body);
+  cab.position.set(-0.04, 0.05, 0.19);
+  upper.add(deck, cab);
+  const links = { boom: beam(0.017, body, true), arm: beam(0.013, body, true), bucket: beam(0.02, body, true) };
+  const cyl = {};
+  for (const j of g.joints) {
+    const c = g.cylinders[j];
+    cyl[j] = { body: beam(c.bore / 2 + 0.003, body), rod: beam(c.rod / 2, steel) };
+    group.add(cyl[j].body, cyl[j].rod);
+  }
+  group.add(upper, links.boom, links.arm, links.bucket);
+  if (ghost) group.renderOrder = 1;
+  return { group, upper, links, cyl };
+}
+
+function poseExcavator(m, f) {
+  if (!f || !f.points) { m.group.visible = false; return; }
+  m.group.visible = true;
+  const p = f.points;
+  m.upper.position.set(...p.swing_axis);
+  m.upper.rotation.z = Math.atan2(p.boom_pivot[1] - p.swing_axis[1], p.boom_pivot[0] - p.swing_axis[0]);
+  beamTo(m.links.boom, p.boom_pivot, p.arm_pivot);
+  beamTo(m.links.arm, p.arm_pivot, p.bucket_pivot);
+  beamTo(m.links.bucket, p.bucket_pivot, p.tip);
+  for (const j of three.geo.joints) {
+    const base = p[`cyl_${j}_base`], rod = p[`cyl_${j}_rod`];
+    beamTo(m.cyl[j].body, base, rod, 0.55);
+    beamTo(m.cyl[j].rod, base, rod);
+  }
+}
+
+// The joint angles the drawing shows, read back from the drawn meshes (frames.py's
+// _angles_of_points and excavator_angle_map): the upper structure's heading, then each
+// link's pitch in its vertical plane, relative to the link before.
+function excavatorAngles(m) {
+  const g = three.geo;
+  const h = m.upper.rotation.z;
+  const e = new THREE.Vector3(Math.cos(h), Math.sin(h), 0);
+  const pitch = (mesh) => { const [a, b] = ends(mesh); const d = b.sub(a); return Math.atan2(d.z, d.dot(e)); };
+  const eb = pitch(m.links.boom), ea = pitch(m.links.arm), ek = pitch(m.links.bucket);
+  const drawn = [h, eb, ea - eb, ek - ea];
+  const wrap = (a) => Math.atan2(Math.sin(a), Math.cos(a));
+  const out = {};
+  g.angle_map.forEach((am, k) => { out[am.joint] = am.sign * wrap(drawn[k] - am.offset); });
+  return out;
+}
+
+function tipArrow(a, f, tip, side) {
+  const mag = f ? Math.hypot(f[0], f[1], f[2]) : 0;
+  if (!f || !tip || !(mag >= TIP_ARROW_MIN)) {
+    a.visible = false; a.userData.length = 0; a.userData.dir = null; a.userData.headAt = null; return 0;
+  }
+  const dir = new THREE.Vector3(f[0] / mag, f[1] / mag, f[2] / mag);
+  const length = Math.max(0.05, mag * three.geo.force_scale);
+  const { shaft, head } = a.userData;
+  shaft.scale.y = length - 0.04;
+  shaft.position.y = (length - 0.04) / 2;
+  head.position.y = length - 0.02;
+  const H = new THREE.Vector3(...tip).add(side);                      // its head at the tip (beside it)
+  a.position.copy(H.clone().sub(dir.clone().multiplyScalar(length)));
+  a.quaternion.setFromUnitVectors(UP, dir);
+  a.visible = true;
+  a.userData.length = length;
+  a.userData.dir = [dir.x, dir.y, dir.z];
+  a.userData.headAt = [H.x, H.y, H.z];
+  return length;
+}
+
+function buildExcavatorScene(g) {
+  three.geo = g;
+  const scene = new THREE.Scene();
+  scene.background = new THREE.Color(0x1c2027);
+  scene.add(new THREE.HemisphereLight(0xffffff, 0x303540, 1.6));
+  const sun = new THREE.DirectionalLight(0xffffff, 1.8);
+  sun.position.set(0.6, -0.8, 1.6);
+  scene.add(sun);
+  const grid = new THREE.GridHelper(3, 30, 0x3a414d, 0x2a3039);   // the ground plane, z = ground_z
+  grid.rotation.x = Math.PI / 2; grid.position.z = g.ground_z;
+  scene.add(grid);
+  const under = new THREE.Mesh(new THREE.BoxGeometry(0.30, 0.22, 0.10), material(COLORS.base, false));
+  under.position.set(0, 0, g.ground_z + 0.05);                      // the undercarriage
+  scene.add(under);
+  three.machine = excavatorMechanism(g, false);
+  three.ghost = excavatorMechanism(g, true);
+  three.ghost.group.visible = false;
+  scene.add(three.machine.group, three.ghost.group);
+  three.fEst = solidArrow(COLORS.force);
+  three.fExt = solidArrow(COLORS.truth);
+  three.fEst.visible = three.fExt.visible = false;
+  scene.add(three.fEst, three.fExt);
+  three.scene = scene;
+  const host = $('scene');
+  three.camera = new THREE.PerspectiveCamera(40, host.clientWidth / Math.max(1, host.clientHeight), 0.01, 30);
+  three.camera.up.set(0, 0, 1);
+  three.camera.position.set(0.9, -1.6, 0.9);
+  startRenderer([0.35, 0, 0.15]);
+}
+
+function showExcavator(f) {
+  poseExcavator(three.machine, f.machine);
+  poseExcavator(three.ghost, f.model);
+  const tip = f.machine && f.machine.points ? f.machine.points.tip : null;
+  const h = three.machine.upper.rotation.z;
+  const side = new THREE.Vector3(-Math.sin(h), Math.cos(h), 0).multiplyScalar(0.03);   // across the plane
+  tipArrow(three.fEst, f.f_tip_est, tip, side);
+  tipArrow(three.fExt, f.f_tip, tip, side.clone().negate());
+  three.dirty = true;
+  const deg = (a) => (a === null || a === undefined ? '   -  ' : (a * 180 / Math.PI).toFixed(2).padStart(7));
+  const vec = (v) => (v ? v.map((c) => c.toFixed(1).padStart(6)).join(' ') : '   -');
+  const lines = [`t       ${f.t.toFixed(3)} s          machine    model [deg]`];
+  for (const j of three.geo.joints) {
+    lines.push(`${j.padEnd(8)}${deg(f.machine && f.machine.angle[j])}    ${deg(f.model && f.model.angle[j])}`);
+  }
+  lines.push(`f_tip_est [N] ${vec(f.f_tip_est)}   f_tip (truth) ${vec(f.f_tip)}`);
+  $('readout').textContent = lines.join('\n');
+}
+
+function excavatorState() {
+  const m = three.machine, gh = three.ghost;
+  const arrowOf = (a) => ({ visible: a.visible, length: a.visible ? a.userData.length : 0,
+                            dir: a.userData.dir || null, head: a.userData.headAt || null });
+  return {
+    kind: 'excavator', t: view.t, playing: view.playing, webgl: view.webgl,
+    machineAngles: m.group.visible ? excavatorAngles(m) : null, machineVisible: m.group.visible,
+    ghostAngles: gh.group.visible ? excavatorAngles(gh) : null, ghostVisible: gh.group.visible,
+    tip: last && last.machine && last.machine.points ? last.machine.points.tip : null,
+    arrowEst: arrowOf(three.fEst), arrowTruth: arrowOf(three.fExt),
+    arrowLength: three.fEst.visible ? three.fEst.userData.length : 0,
+    fTipEst: last ? last.f_tip_est : null, fTip: last ? last.f_tip : null,
+  };
+}
+
 function drawnState() {
   const g = three.geo;
   if (!g) return null;
+  if (three.kind === 'excavator') return excavatorState();
   const ref = Math.atan2(g.C[1] - g.O[1], g.C[0] - g.O[0]);          // the direction O->C
   const m = three.machine, gh = three.ghost;
   return {
@@ -181,7 +360,7 @@ function drawnState() {
 }
 
 // -- plots -----------------------------------------------------------------------------------
-const PLOTS = [
+const BOOM_PLOTS = [
   { title: 'p_a [bar gauge]: machine, model dashed', unit: 'bar', series: [['machine', COLORS.machine, (f) => bar(f.machine && f.machine.p_a)],
                                                     ['model', COLORS.ghost, (f) => bar(f.model && f.model.p_a), true]] },
   { title: 'p_b [bar gauge]: machine, model dashed', unit: 'bar', series: [['machine', COLORS.machine, (f) => bar(f.machine && f.machine.p_b)],
@@ -191,12 +370,28 @@ const PLOTS = [
   { title: 'force on the piston [N]: f_est, f_ext dashed', unit: 'N', series: [['f_est', COLORS.force, (f) => f.f_est],
                                             ['f_ext (truth)', COLORS.truth, (f) => f.f_ext, true]] },
 ];
+const JOINT_COLORS = { swing: 0xc792ea, boom: 0xf0a030, arm: 0x7fd17f, bucket: 0x5ad8e6 };
+const EXCAVATOR_JOINTS = ['swing', 'boom', 'arm', 'bucket'];
+const rad2deg = (a) => (a === null || a === undefined ? null : a * 180 / Math.PI);
+const perJoint = (what, conv, model) => EXCAVATOR_JOINTS.map((j) => [`${j}${model ? ' model' : ''}`, JOINT_COLORS[j],
+  (f) => { const p = model ? f.model : f.machine; return p ? conv(p[what][j]) : null; }, model]);
+const EXCAVATOR_PLOTS = [
+  { title: 'joint angles [deg]: machine, model dashed', series: [...perJoint('angle', rad2deg, false), ...perJoint('angle', rad2deg, true)] },
+  { title: 'p_a [bar gauge] per joint: machine, model dashed', series: [...perJoint('p_a', (p) => bar(p), false), ...perJoint('p_a', (p) => bar(p), true)] },
+  { title: 'p_b [bar gauge] per joint: machine, model dashed', series: [...perJoint('p_b', (p) => bar(p), false), ...perJoint('p_b', (p) => bar(p), true)] },
+  { title: 'tip force [N] x, y, z: estimated, truth dashed', series: [0, 1, 2].flatMap((k) => [
+    [`f_tip_est ${'xyz'[k]}`, [0xff4d5e, 0x7fd17f, 0x5ab0ff][k], (f) => (f.f_tip_est ? f.f_tip_est[k] : null)],
+    [`f_tip ${'xyz'[k]}`, [0xff4d5e, 0x7fd17f, 0x5ab0ff][k], (f) => (f.f_tip ? f.f_tip[k] : null), true]]) },
+];
+let PLOTS = BOOM_PLOTS;
 function bar(p) { return p === null || p === undefined ? null : p / 1e5; }
 function mm(x) { return x === null || x === undefined ? null : x * 1e3; }
 const hex = (c) => '#' + c.toString(16).padStart(6, '0');
 const plots = { charts: [], data: [], dirty: false };
 
-function buildPlots() {
+function buildPlots(kind) {
+  PLOTS = kind === 'excavator' ? EXCAVATOR_PLOTS : BOOM_PLOTS;
+  plots.kind = kind || 'boom';
   const host = $('plots');
   host.innerHTML = '';
   plots.charts = []; plots.data = [];
@@ -216,9 +411,11 @@ function buildPlots() {
     plots.data.push(data);
     plots.charts.push(new uPlot(opts, data, div));
   }
+  if (plots.charts.length) resize();          // each to its share, now that all are laid out
 }
 
 function plotPush(f) {
+  if ((f.kind || 'boom') !== plots.kind) return;          // the other machine's frame: not these plots
   PLOTS.forEach((p, i) => {
     const d = plots.data[i];
     d[0].push(f.t);
@@ -245,6 +442,8 @@ function show(f) {
   view.t = f.t;
   view.playing = !!f.playing;
   if (!three.geo) return;
+  if ((f.kind || 'boom') !== three.kind) return;       // a frame of the other machine before its hello
+  if (three.kind === 'excavator') { showExcavator(f); showControls(f); return; }
   pose(three.machine, f.machine);
   pose(three.ghost, f.model);
   const ang = three.machine.boom.rotation.z;
@@ -258,6 +457,10 @@ function show(f) {
     `alpha   ${deg(f.machine && f.machine.alpha)} deg machine   ${deg(f.model && f.model.alpha)} deg model\n` +
     `x       ${num(mm(f.machine && f.machine.x), 1).padStart(6)} mm  machine   ${num(mm(f.model && f.model.x), 1).padStart(6)} mm  model\n` +
     `f_est   ${num(f.f_est)} N   f_ext ${num(f.f_ext)} N   f_reflect ${num(f.f_reflect, 2)} N`;
+  showControls(f);
+}
+
+function showControls(f) {
   if (view.mode === 'replay' && !seeking) {
     $('seek').value = f.t;
     $('time').textContent = `${f.t.toFixed(2)} s`;
@@ -272,7 +475,9 @@ function onMessage(ev) {
     $('source').textContent = `${msg.mode}: ${msg.source}`;
     $('controls').classList.toggle('live', msg.mode !== 'replay');
     if (msg.duration !== null) { $('seek').min = msg.t0; $('seek').max = msg.t0 + msg.duration; }
-    if (!three.geo) buildScene(msg.scene);
+    const kind = msg.scene.kind || 'boom';
+    if (!three.geo || three.kind !== kind) { buildScene(msg.scene); last = null; }
+    if (plots.kind !== kind) buildPlots(kind);
     if (wanted && msg.mode === 'replay') {            // back after a dropped connection: resume there
       send({ cmd: 'speed', value: Number($('speed').value) });
       if (!wanted.playing) send({ cmd: 'pause' });
@@ -350,6 +555,6 @@ function loop(now) {
   }
 }
 
-buildPlots();
+buildPlots('boom');
 connect();
 requestAnimationFrame(loop);

@@ -1,0 +1,156 @@
+"""linkage: the whole excavator's four-joint rigid linkage as an FMI 2.0 (and 3.0) co-simulation FMU.
+
+Inputs the eight absolute chamber pressures (``p_a_<joint>``, ``p_b_<joint>``) and the
+force of the environment on the bucket tip (world frame); outputs each piston's position
+and velocity (its states), each joint's angle (the recording's ``angle_<joint>``: the
+swing angle, the boom's alpha of Eq. 12, the arm's and the bucket's relative angles) and
+the tip's position.  The physics is ``physics/excavator.py`` (``shared/spec/excavator.md``;
+Eq. 8 to 12 per cylinder): mass matrix, Coriolis and gravity of the four joints, each
+cylinder acting through its lever arm, Eq. 9 friction and hard end stops per cylinder,
+the tip force through the Jacobian transpose.  Within a step the inputs are held and the
+motion is integrated in short substeps (``advance_linkage``).
+"""
+import math
+from dataclasses import replace
+
+from boomfmi_linkage_lib.fmislave import L_MAX, BoomSlave, input, output, parameter
+from boomfmi_linkage_lib.physics import reference_rig
+from boomfmi_linkage_lib.physics.excavator import (JOINTS, LINKS, Excavator, Link, advance_linkage,
+                                                   check_excavator, forward_kinematics, joint_angles)
+from boomfmi_linkage_lib.physics.validation import ParameterError, require_non_negative
+
+_EX = Excavator()
+_DEG = math.pi / 180.0
+
+
+def _joint_parameters(joint):
+    a = getattr(_EX, joint)
+    rows = [
+        parameter(f"bore_{joint}", a.bore, "m", f"{joint} cylinder bore", min=0.0),
+        parameter(f"rod_{joint}", a.rod, "m", f"{joint} cylinder piston-rod diameter", min=0.0),
+        parameter(f"stroke_{joint}", a.stroke, "m", f"{joint} cylinder stroke L", min=0.0, max=L_MAX),
+        parameter(f"c1_{joint}", a.c1, "m", f"{joint} mounting triangle: pivot to the cylinder's base eye"
+                  + (" (Eq. 10, 12's a)" if joint == "boom" else ""), min=0.0),
+        parameter(f"c2_{joint}", a.c2, "m", f"{joint} mounting triangle: pivot to the cylinder's rod eye"
+                  + (" (Eq. 10, 12's b)" if joint == "boom" else ""), min=0.0),
+        parameter(f"l_min_{joint}", a.l_min, "m", f"{joint} cylinder length eye to eye at x = 0 (Eq. 11)",
+                  min=0.0),
+        parameter(f"K_v_{joint}", a.K_v, "N.s/m", f"{joint} cylinder viscous friction coefficient (Eq. 8)",
+                  min=0.0),
+        parameter(f"F_s_{joint}", a.F_s, "N", f"{joint} cylinder static friction force (Eq. 9)", min=0.0),
+        parameter(f"F_d_{joint}", a.F_d, "N", f"{joint} cylinder Coulomb friction force (Eq. 9)", min=0.0),
+        parameter(f"x0_{joint}", 0.5 * a.stroke, "m", f"initial {joint} piston position, within [0, L]",
+                  min=0.0, max=L_MAX),
+    ]
+    if joint != "boom":
+        rows.insert(6, parameter(f"lower_{joint}", a.lower, "rad",
+                                 f"{joint} joint angle at x = 0 (its lower limit)", min=-math.pi, max=math.pi))
+    return rows
+
+
+def _link_parameters(name, link):
+    return [
+        parameter(f"length_{name}", link.length, "m",
+                  f"{name} length, pivot to the next pivot" + (" or to the tip" if name == "bucket" else ""),
+                  min=0.0),
+        parameter(f"mass_{name}", link.mass, "kg", f"{name} mass" + (" (empty)" if name == "bucket" else ""),
+                  min=0.0),
+        parameter(f"com_{name}", link.com, "m", f"{name} centre of mass from its pivot, along the link"),
+    ]
+
+
+class Linkage(BoomSlave):
+    description = ("Excavator linkage: swing, boom, arm and bucket as rigid links driven by four cylinders, "
+                   "with Eq. 9 friction and end stops per cylinder (excavator.md, paper Eq. 8 to 12)")
+    variables = (
+        *(v for j in JOINTS for v in (
+            input(f"p_a_{j}", reference_rig.P_atm, "Pa", f"absolute pressure in the {j} cylinder's chamber A (cap side)",
+                  min=0.0),
+            input(f"p_b_{j}", reference_rig.P_atm, "Pa", f"absolute pressure in the {j} cylinder's chamber B (rod side)",
+                  min=0.0))),
+        input("f_tip_x", 0.0, "N", "force of the environment on the bucket tip, world x (ahead at swing 0)"),
+        input("f_tip_y", 0.0, "N", "force of the environment on the bucket tip, world y"),
+        input("f_tip_z", 0.0, "N", "force of the environment on the bucket tip, world z (up)"),
+        *(v for j in JOINTS for v in (
+            output(f"x_{j}", 0.0, "m", f"{j} piston position, 0 = fully retracted; within the stroke [0, L]",
+                   min=0.0, max=L_MAX),
+            output(f"v_{j}", 0.0, "m/s", f"{j} piston velocity, positive extending"))),
+        output("angle_swing", 0.0, "rad", "swing angle theta_swing, 0 = straight ahead, positive counter-clockwise "
+               "seen from above", min=-math.pi, max=math.pi),
+        output("angle_boom", 0.0, "rad", "boom angle alpha (Eq. 12)", min=0.0, max=math.pi),
+        output("angle_arm", 0.0, "rad", "arm angle relative to the boom, positive crowding in",
+               min=-2 * math.pi, max=2 * math.pi),
+        output("angle_bucket", 0.0, "rad", "bucket angle relative to the arm, positive curling in",
+               min=-2 * math.pi, max=2 * math.pi),
+        output("tip_x", 0.0, "m", "bucket tip, world x"),
+        output("tip_y", 0.0, "m", "bucket tip, world y"),
+        output("tip_z", 0.0, "m", "bucket tip, world z (0 = ground plane)"),
+        *(v for j in JOINTS for v in _joint_parameters(j)),
+        parameter("h", _EX.boom_h, "m", "boom geometry h (Eq. 10)", min=0.0),
+        *(v for name, link in zip(LINKS, _EX.links) for v in _link_parameters(name, link)),
+        parameter("pivot_forward", _EX.pivot_forward, "m", "boom pivot ahead of the swing axis"),
+        parameter("pivot_height", _EX.pivot_height, "m", "boom pivot above the ground plane"),
+        parameter("P_atm", reference_rig.P_atm, "Pa", "atmospheric pressure (it acts on the rods)", min=0.0),
+        parameter("payload", 0.0, "kg", "payload in the bucket, at the bucket's centre of mass", min=0.0),
+        parameter("max_substep", 2.5e-4, "s", "longest integration substep", min=1e-6, max=1e-2),
+    )
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.modelName = "linkage"
+        self._ex = _EX
+        self._x = [0.0] * 4
+        self._v = [0.0] * 4
+        self._q = [0.0] * 4
+        self._tip = (0.0, 0.0, 0.0)
+
+    def setup(self):
+        acts = {}
+        for j in JOINTS:
+            old = getattr(_EX, j)
+            acts[j] = replace(old, **{f: getattr(self, f"{f}_{j}") for f in
+                                      ("bore", "rod", "stroke", "c1", "c2", "l_min", "K_v", "F_s", "F_d")},
+                              lower=None if j == "boom" else getattr(self, f"lower_{j}"))
+        # each link a slender rod, inertia m L^2 / 12 about its centre (excavator.md); the
+        # upper structure's inertia about z and g are excavator.md's (boomfmi.units has no kg.m2)
+        links = {f"{n}_link": Link(getattr(self, f"length_{n}"), getattr(self, f"mass_{n}"),
+                                   getattr(self, f"com_{n}"),
+                                   getattr(self, f"mass_{n}") * getattr(self, f"length_{n}") ** 2 / 12.0)
+                 for n in LINKS}
+        ex = replace(_EX, **acts, **links, boom_h=self.h, pivot_forward=self.pivot_forward,
+                     pivot_height=self.pivot_height, P_atm=self.P_atm)
+        check_excavator(ex)
+        require_non_negative("payload", self.payload)
+        for j in JOINTS:
+            x0, L = getattr(self, f"x0_{j}"), getattr(ex, j).stroke
+            if not 0.0 <= x0 <= L:
+                raise ParameterError(f"x0_{j}", x0, f"must lie within the stroke [0, {L:g}] m")
+        self._ex = ex
+        self._x = [float(getattr(self, f"x0_{j}")) for j in JOINTS]
+        self._v = [0.0] * 4
+        self._update()
+
+    def _update(self):
+        self._q = [float(t) for t in joint_angles(self._x, self._ex)]
+        self._tip = tuple(float(t) for t in forward_kinematics(self._q, self._ex)["tip"])
+
+    def step(self, t, dt):
+        p_a = [getattr(self, f"p_a_{j}") for j in JOINTS]
+        p_b = [getattr(self, f"p_b_{j}") for j in JOINTS]
+        x, v = advance_linkage((self._x, self._v), p_a, p_b, (self.f_tip_x, self.f_tip_y, self.f_tip_z), dt,
+                               self._ex, payload=self.payload, max_substep=self.max_substep)
+        self._x = [float(t) for t in x]
+        self._v = [float(t) for t in v]
+        self._update()
+
+
+def _state_property(kind, i):
+    return property(lambda self: (self._x if kind == "x" else self._v)[i])
+
+
+for _i, _j in enumerate(JOINTS):
+    setattr(Linkage, f"x_{_j}", _state_property("x", _i))
+    setattr(Linkage, f"v_{_j}", _state_property("v", _i))
+    setattr(Linkage, f"angle_{_j}", property(lambda self, i=_i: self._q[i]))
+for _i, _c in enumerate("xyz"):
+    setattr(Linkage, f"tip_{_c}", property(lambda self, i=_i: self._tip[i]))
