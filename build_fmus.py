@@ -19,9 +19,10 @@ sys.path.insert(0, str(HERE / "src"))
 
 from boomfmi.fmubuild import BuildError, build_fmu  # noqa: E402
 
-FMU_NAMES = ("valve", "cylinder", "boom_load", "force_estimator", "hardware_bridge", "linkage")
+FMU_NAMES = ("valve", "cylinder", "boom_load", "force_estimator", "hardware_bridge", "linkage", "excavator_bridge",
+             "excavator_force_estimator")
 #: SSP archives: build/<name>.ssp from ssp/<ssd>
-SSPS = {"excavator_boom": "SystemStructure.ssd", "teleoperation": "teleoperation.ssd"}
+SSPS = {"excavator_boom": "SystemStructure.ssd", "teleoperation": "teleoperation.ssd", "excavator": "excavator.ssd"}
 
 
 def main(argv=None) -> int:
@@ -50,6 +51,9 @@ def main(argv=None) -> int:
         from boomfmi.fmubuild.ssp import fmus_of, pack_ssp, write_reference_parameters
         if set(args.names) == set(FMU_NAMES) and args.write_references:
             print(f"wrote {write_reference_parameters([HERE / 'ssp' / ssd for ssd in SSPS.values()], args.out / 'fmus', HERE / 'ssp' / 'reference_rig.ssv')}")
+        if args.write_references and {"valve", "cylinder", "linkage"} & set(args.names):
+            from boomfmi.fmubuild.excavator import excavator_parameters_ssv
+            print(f"wrote {excavator_parameters_ssv(HERE / 'ssp' / 'excavator.ssd', args.out / 'fmus', HERE / 'ssp' / 'excavator.ssv')}")
         for name, ssd in SSPS.items():
             # an SSP carries copies of its FMUs: re-pack every one that holds a rebuilt FMU
             fmus = fmus_of(HERE / "ssp" / ssd)

@@ -1,16 +1,18 @@
 #!/usr/bin/env python3
-"""Real-time factor of the full boom at a 1 ms step, and its FMI-call floor.
+"""Real-time factor of the full boom and of the whole excavator at a 1 ms step, and
+their FMI-call floors.
 
 Runs build/excavator_boom.ssp (Gauss-Seidel, 1 ms) over 10 simulated seconds of the
-paper's command profile and prints the real-time factor (simulated seconds per wall
-second).  Then runs the same system with every FMU replaced by a "null" FMU built the
+paper's command profile, and build/excavator.ssp (nine FMUs: four valves, four
+cylinders, the linkage) over 10 s of the digging cycle, and prints for each the
+real-time factor (simulated seconds per wall second).  Then runs the same system with every FMU replaced by a "null" FMU built the
 same way (pythonfmu, boomfmi's base class and status shim, the same variables and
 dependencies, so the master makes exactly the same set/step/get calls) whose step and
 outputs compute nothing.  The ratio of the two wall times says how much of the run is
 the model's own work and how much the FMI call path (fmpy -> shim -> pythonfmu ->
 Python).  Each figure is the best of --repeat runs, pinned to one core.
 
-    python benchmarks/cosim_speed.py [--repeat 3]
+    python benchmarks/cosim_speed.py [--repeat 3] [--systems boom,excavator]
 """
 from __future__ import annotations
 
@@ -28,7 +30,7 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from fmpy import read_model_description  # noqa: E402
 
-from boomfmi.experiments import paper_multistep  # noqa: E402
+from boomfmi.experiments import digging_cycle, paper_multistep  # noqa: E402
 from boomfmi.fmubuild import build_fmu  # noqa: E402
 from boomfmi.system import CoSimulation  # noqa: E402
 
@@ -83,13 +85,20 @@ def null_ssp(ssp: Path, workdir: Path) -> Path:
     return out
 
 
-def best_wall(ssp: Path, stop: float, repeat: int) -> float:
-    profile = paper_multistep()
+def best_wall(ssp: Path, stop: float, repeat: int, excavator: bool = False) -> float:
+    """The best wall time [s] of ``repeat`` runs: the boom on the paper's profile, the
+    whole excavator (``excavator``) on the digging cycle, each repeated to ``stop``."""
+    if excavator:
+        dig = digging_cycle()
+        inputs = lambda s: {f"valve_{k[2:]}.u": u for k, u in dig(s % dig.duration).items()}   # noqa: E731
+    else:
+        profile = paper_multistep()
+        inputs = lambda s: {"valve.u": profile(s % profile.duration)["u"]}   # noqa: E731
     walls = []
     for _ in range(repeat):
         with CoSimulation(ssp, 1e-3, "gauss-seidel") as cosim:
             t = time.perf_counter()
-            cosim.simulate(stop, lambda s: {"valve.u": profile(s % profile.duration)["u"]})
+            cosim.simulate(stop, inputs)
             walls.append(time.perf_counter() - t)
     return min(walls)
 
@@ -97,22 +106,35 @@ def best_wall(ssp: Path, stop: float, repeat: int) -> float:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--ssp", type=Path, default=ROOT / "build" / "excavator_boom.ssp")
+    ap.add_argument("--excavator-ssp", type=Path, default=ROOT / "build" / "excavator.ssp",
+                    help="the whole excavator (9 FMUs), run on the digging cycle")
+    ap.add_argument("--systems", default="boom,excavator", help="which systems: boom, excavator or both")
     ap.add_argument("--stop", type=float, default=10.0)
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args(argv)
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
-    with tempfile.TemporaryDirectory() as tmp:
-        floor_ssp = null_ssp(args.ssp, Path(tmp))
-        full = best_wall(args.ssp, args.stop, args.repeat)
-        floor = best_wall(floor_ssp, args.stop, args.repeat)
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, one core")
-    print(f"full system, 1 ms step, {args.stop:g} s simulated: {full:.3f} s wall, "
-          f"real-time factor {args.stop / full:.1f}")
-    print(f"FMI-call floor (null FMUs, same calls):   {floor:.3f} s wall, "
-          f"real-time factor {args.stop / floor:.1f}")
-    print(f"ratio full / floor: {full / floor:.2f} (the model's work is {100 * (1 - floor / full):.0f} % of the run)")
+    for system in args.systems.split(","):
+        excavator = system == "excavator"
+        ssp = args.excavator_ssp if excavator else args.ssp
+        with tempfile.TemporaryDirectory() as tmp:
+            floor_ssp = null_ssp(ssp, Path(tmp))
+            full = best_wall(ssp, args.stop, args.repeat, excavator)
+            floor = best_wall(floor_ssp, args.stop, args.repeat, excavator)
+        n = _components(ssp)
+        print(f"{system} ({n} FMUs), 1 ms step, {args.stop:g} s simulated: {full:.3f} s wall, "
+              f"real-time factor {args.stop / full:.2f}")
+        print(f"  FMI-call floor (null FMUs, same calls): {floor:.3f} s wall, "
+              f"real-time factor {args.stop / floor:.2f}")
+        print(f"  ratio full / floor: {full / floor:.2f} (the model's work is {100 * (1 - floor / full):.0f} % "
+              f"of the run)")
     return 0
+
+
+def _components(ssp: Path) -> int:
+    from boomfmi.system.ssp import read_ssp
+    return len(read_ssp(ssp).components)
 
 
 if __name__ == "__main__":

@@ -102,3 +102,18 @@ def test_effect_free_recordings_of_other_designs_get_no_verdict_and_no_fits(tmp_
     for k, v in cfg["params"].items():
         assert doc["baseline"]["params"][k] == pytest.approx(v, rel=0.05), k
     assert "no candidate effect was fitted" in (tmp_path / "out" / "report.html").read_text()
+
+
+def test_a_second_effect_pays_for_what_the_first_leaves_beyond_the_noise():
+    """The pair's penalty counts only what the single effect leaves beyond the holdout's
+    noise floor: near the noise a smaller cut pays, far beyond it 40 % is needed."""
+    from boomfmi.diagnose.attribute import MIN_SHRINK_SECOND, _pays
+    one = lambda total: {"x": total / 3, "p_a": total / 3, "p_b": total / 3}
+    noise = 0.0033
+    assert MIN_SHRINK_SECOND == 0.4
+    assert _pays(one(0.0128), one(0.0085), noise)            # 0.0043 of 0.0095 beyond the noise
+    assert not _pays(one(0.0128), one(0.0095), noise)        # 0.0033 of it: not enough
+    assert not _pays(one(0.05), one(0.035), noise)           # 0.015 of 0.0467
+    assert _pays(one(0.05), one(0.03), noise)
+    assert not _pays(one(0.003), one(0.0029), noise)         # within the noise nothing pays but a cut
+    assert not _pays(one(0.003), one(0.0031), noise)         # a pair that is worse never pays

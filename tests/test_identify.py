@@ -172,3 +172,13 @@ def test_F_s_that_the_starts_cannot_place_is_said_and_nothing_else_suffers():
     assert lo <= TRUTH_B["F_s"] <= hi and result.params["F_s"].value >= result.params["F_d"].value
     for k in ("K_v", "F_d", "F_L", "M"):
         assert result.params[k].value == pytest.approx(TRUTH_B[k], rel=0.05), k
+
+
+def test_the_spread_of_the_starts_is_robust_to_a_stray_one():
+    """F_s's interval is at least the starts' own spread over the root of their number:
+    1.4826 times the median absolute deviation, which one stray start does not inflate."""
+    from boomfmi.identify.fit import start_spread
+    assert start_spread([100.0]) == 0.0
+    assert start_spread([98.0, 100.0, 102.0, 100.0, 250.0]) == pytest.approx(1.4826 * 2.0)
+    # four starts that disagree (a hybrid-rig recording with a 12-bit angle sensor)
+    assert start_spread([122.9, 247.7, 104.5, 81.8]) == pytest.approx(1.4826 * 20.55, rel=1e-3)

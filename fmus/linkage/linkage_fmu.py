@@ -16,7 +16,7 @@ from dataclasses import replace
 from boomfmi_linkage_lib.fmislave import L_MAX, BoomSlave, input, output, parameter
 from boomfmi_linkage_lib.physics import reference_rig
 from boomfmi_linkage_lib.physics.excavator import (JOINTS, LINKS, Excavator, Link, advance_linkage,
-                                                   check_excavator, forward_kinematics, joint_angles)
+                                                   angles_and_tip, check_excavator)
 from boomfmi_linkage_lib.physics.validation import ParameterError, require_non_negative
 
 _EX = Excavator()
@@ -131,16 +131,15 @@ class Linkage(BoomSlave):
         self._update()
 
     def _update(self):
-        self._q = [float(t) for t in joint_angles(self._x, self._ex)]
-        self._tip = tuple(float(t) for t in forward_kinematics(self._q, self._ex)["tip"])
+        self._q, self._tip = angles_and_tip(self._x, self._ex)
 
     def step(self, t, dt):
-        p_a = [getattr(self, f"p_a_{j}") for j in JOINTS]
-        p_b = [getattr(self, f"p_b_{j}") for j in JOINTS]
+        p_a = [self.p_a_swing, self.p_a_boom, self.p_a_arm, self.p_a_bucket]
+        p_b = [self.p_b_swing, self.p_b_boom, self.p_b_arm, self.p_b_bucket]
         x, v = advance_linkage((self._x, self._v), p_a, p_b, (self.f_tip_x, self.f_tip_y, self.f_tip_z), dt,
                                self._ex, payload=self.payload, max_substep=self.max_substep)
-        self._x = [float(t) for t in x]
-        self._v = [float(t) for t in v]
+        self._x = x.tolist()
+        self._v = v.tolist()
         self._update()
 
 

@@ -5,10 +5,17 @@ its ``u`` with a command profile, and writes what comes back as a recording, row
 row and crash-safe: a process killed mid-run leaves a file whose every row is valid,
 and a link that fails mid-run ends the run with an error after everything received
 so far has been written.
+
+The whole excavator's experiments (``experiments.EXCAVATOR_PROFILES``: the digging
+cycle...) go through the ``excavator_bridge`` FMU to an excavator rig
+(``boomfmi rig serve --config examples/rig/excavator_*.json``) and are written in the
+excavator recording's columns (:data:`EXCAVATOR_COLUMNS`).
 """
 from __future__ import annotations
 
-from .experiments import profile
+from pathlib import Path
+
+from .experiments import EXCAVATOR_PROFILES, JOINTS, excavator_profile, profile
 from .recording import RecordingWriter
 from .system.instance import FmuError, FmuInstance
 
@@ -18,12 +25,29 @@ from .system.instance import FmuError, FmuInstance
 #: measurement, which the bridge does not have).
 COLUMNS = ("t", "u", "p_a", "p_b", "alpha", "f_ext", "x_alpha", "u_cmd", "link_ok", "failsafe", "t_rig")
 OUTPUTS = ("u_applied", "p_a", "p_b", "alpha", "f_ext", "x", "link_ok", "failsafe", "t_rig", "lost_packets")
+#: The excavator's recording through its bridge: the excavator recording's columns (the
+#: commands the valves got), the true tip force where the rig knows it, each piston's x
+#: from its measured angle (``x_angle_<joint>``), the commands sent, the link's state.
+EXCAVATOR_COLUMNS = (("t",) + tuple(f"{q}_{j}" for q in ("u", "p_a", "p_b", "angle") for j in JOINTS)
+                     + ("f_tip_x", "f_tip_y", "f_tip_z") + tuple(f"x_angle_{j}" for j in JOINTS)
+                     + tuple(f"u_cmd_{j}" for j in JOINTS) + ("link_ok", "failsafe", "t_rig"))
+_MEASURED = (tuple(f"{q}_{j}" for q in ("p_a", "p_b", "angle") for j in JOINTS) + ("f_tip_x", "f_tip_y", "f_tip_z")
+             + tuple(f"x_{j}" for j in JOINTS))
+EXCAVATOR_OUTPUTS = (tuple(f"u_applied_{j}" for j in JOINTS) + _MEASURED
+                     + ("link_ok", "failsafe", "t_rig", "lost_packets"))
+#: The bridges' default places.
+FMU = Path("build/fmus/hardware_bridge.fmu")
+EXCAVATOR_FMU = Path("build/fmus/excavator_bridge.fmu")
 
 
 def record_experiment(fmu, rig: str, out, experiment: str = "paper_multistep", step: float = 1e-3,
                       stop_time: float | None = None, key_file: str | None = None,
                       timeout: float = 0.05, retries: int = 2, loss_budget: int = 20) -> dict:
     """Run ``experiment`` on the rig at ``rig`` (udp://HOST:PORT); write ``out``.
+
+    ``fmu`` None: ``build/fmus/hardware_bridge.fmu``, or for an excavator experiment
+    (:func:`record_excavator_experiment`, to which it then hands over)
+    ``build/fmus/excavator_bridge.fmu``.
 
     Nothing is written, and an existing ``out`` is left as it was, until the rig has
     answered (the bridge's handshake brings the first sample).  From then on rows are
@@ -32,6 +56,10 @@ def record_experiment(fmu, rig: str, out, experiment: str = "paper_multistep", s
     run with :class:`FmuError` after every row received is written and the sidecar
     names why.  Returns the bridge's link figures (``lost_packets``, ``rows``).
     """
+    if experiment in EXCAVATOR_PROFILES:
+        return record_excavator_experiment(EXCAVATOR_FMU if fmu is None else fmu, rig, out, experiment, step,
+                                           stop_time, key_file, timeout, retries, loss_budget)
+    fmu = FMU if fmu is None else fmu
     command = profile(experiment)
     stop = command.duration if stop_time is None else stop_time
     n = int(round(stop / step))
@@ -67,4 +95,54 @@ def record_experiment(fmu, rig: str, out, experiment: str = "paper_multistep", s
         return {"rows": rows + 1, "lost_packets": y["lost_packets"]}
 
 
-__all__ = ["record_experiment", "FmuError", "COLUMNS"]
+def record_excavator_experiment(fmu, rig: str, out, experiment: str = "digging_cycle", step: float = 1e-3,
+                                stop_time: float | None = None, key_file: str | None = None,
+                                timeout: float = 0.05, retries: int = 2, loss_budget: int = 20) -> dict:
+    """:func:`record_experiment` for the whole excavator: the excavator experiment
+    ``experiment`` (``experiments.excavator_profile``) through the ``excavator_bridge``
+    FMU ``fmu`` to the excavator rig at ``rig``, written to ``out`` in
+    :data:`EXCAVATOR_COLUMNS` (row by row, crash-safe, the sidecar's ``incomplete`` as
+    there).  Returns ``{"rows", "lost_packets"}``."""
+    command = excavator_profile(experiment)
+    stop = command.duration if stop_time is None else stop_time
+    n = int(round(stop / step))
+    parameters = dict(mode="udp", rig=rig, key_file=str(key_file or ""), timeout=timeout,
+                      retries=retries, loss_budget=loss_budget)
+    notes = {"notes": f"recorded from {rig}, excavator experiment {experiment}"}
+
+    def cmds(t):
+        c = command(t)
+        return [float(c[f"u_{j}"]) for j in JOINTS]
+
+    def row(t, applied, y, sent, link_ok):
+        return (t, *applied, *(y[c] for c in _MEASURED[:-4]), *(y[f"x_{j}"] for j in JOINTS), *sent,
+                link_ok, float(y["failsafe"]), y["t_rig"])
+
+    rows = 0
+    with FmuInstance(fmu, name="excavator_bridge") as bridge:
+        bridge.initialize(parameters, start_time=0.0, stop_time=stop,
+                          inputs={f"u_{j}": u for j, u in zip(JOINTS, cmds(0.0))})
+        y = bridge.get(*EXCAVATOR_OUTPUTS)
+        with RecordingWriter(out, EXCAVATOR_COLUMNS, sidecar={**notes, "incomplete": "the recorder did not finish "
+                                                              "(killed or still running)"}) as w:
+            for k in range(n):
+                t = k * step
+                u = cmds(t)
+                bridge.set(**{f"u_{j}": c for j, c in zip(JOINTS, u)})
+                try:
+                    bridge.step_to(t, step)
+                except FmuError as e:
+                    w.write(row(t, u, y, u, 0.0))
+                    w.set_sidecar({**notes, "incomplete": f"the link failed at t = {t:g} s: {e}"})
+                    raise
+                nxt = bridge.get(*EXCAVATOR_OUTPUTS)       # u_applied: what the valves got over [t_k, t_k+1)
+                w.write(row(t, [nxt[f"u_applied_{j}"] for j in JOINTS], y, u, float(y["link_ok"])))
+                rows += 1
+                y = nxt
+            u = cmds(n * step)
+            w.write(row(n * step, u, y, u, float(y["link_ok"])))
+            w.set_sidecar(notes)
+        return {"rows": rows + 1, "lost_packets": y["lost_packets"]}
+
+
+__all__ = ["record_experiment", "record_excavator_experiment", "FmuError", "COLUMNS", "EXCAVATOR_COLUMNS"]

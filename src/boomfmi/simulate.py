@@ -21,13 +21,15 @@ import pandas as pd
 
 from . import physics as ph
 from .compare import initial_state
-from .experiments import PROFILES, profile
+from .experiments import EXCAVATOR_PROFILES, PROFILES, excavator_profile, profile
 from .physics import reference_rig
 from .recording import read_recording
 from .system.master import CoSimulation
 from .system.ssv import Parameter
 
 RECORDED = ("p_a", "p_b", "alpha", "x", "v")
+#: The whole excavator's joints (the linkage's, ``physics.excavator.JOINTS``).
+JOINTS = ph.JOINTS
 
 
 def _unique(names: list[str], short: str, what: str) -> str:
@@ -123,11 +125,13 @@ def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
     """Simulate ``experiment`` on the SSP; return recording columns plus x and v.
     ``view`` (udp://HOST:PORT) streams the run to ``boomfmi view --live`` as it goes,
     signed with ``view_key`` (by default ``link.protocol.load_key()``'s: $BOOMFMI_LINK_KEY)."""
-    if experiment not in PROFILES and Path(experiment).suffix.lower() != ".csv" \
-            and not Path(experiment).exists():
-        raise ValueError(f"unknown experiment {experiment!r}: give one of {', '.join(PROFILES)} "
-                         f"or a recording (.csv)")
+    if experiment not in PROFILES and experiment not in EXCAVATOR_PROFILES \
+            and Path(experiment).suffix.lower() != ".csv" and not Path(experiment).exists():
+        raise ValueError(f"unknown experiment {experiment!r}: give one of {', '.join(PROFILES)}, "
+                         f"for the whole excavator one of {', '.join(EXCAVATOR_PROFILES)}, or a recording (.csv)")
     with CoSimulation(ssp, step, algorithm, parameters) as cosim:
+        if any(i.model_description.modelName == "linkage" for i in cosim.instances.values()):
+            return run_excavator(cosim, experiment, stop_time, progress)
         names = {n: {v.name for v in i.model_description.modelVariables if v.causality == "parameter"}
                  for n, i in cosim.instances.items()}
         over = rig_parameters(experiment, names)
@@ -177,3 +181,66 @@ def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
         if hits:
             out[name] = result[hits[0]]
     return out
+
+
+def excavator_wiring(cosim) -> dict[str, tuple[str, str, str]]:
+    """Per joint, ``(linkage, cylinder, valve)``: the components of an excavator system,
+    found through its connections (the cylinder drives the linkage's ``p_a_<joint>``,
+    the valve the cylinder's ``mdot_a``), not by their names."""
+    links = [n for n, i in cosim.instances.items() if i.model_description.modelName == "linkage"]
+    if len(links) != 1:
+        raise ValueError(f"an excavator system has exactly one linkage, this one has {links or 'none'}")
+    link = links[0]
+    conns = cosim.structure.connections
+    source = {(c.end_element, c.end_connector): c.start_element for c in conns}
+    out = {}
+    for j in JOINTS:
+        cyl = source.get((link, f"p_a_{j}"))
+        valve = source.get((cyl, "mdot_a")) if cyl else None
+        if cyl is None or valve is None or f"{valve}.u" not in cosim.inputs:
+            raise ValueError(f"the excavator system must drive {link}.p_a_{j} from a cylinder fed by a valve "
+                             f"whose u is a free input (found cylinder {cyl!r}, valve {valve!r})")
+        out[j] = (link, cyl, valve)
+    return out
+
+
+def excavator_inputs(experiment: str, valves: dict[str, str]):
+    """``(inputs, stop_time)`` for a named excavator profile or an excavator recording's
+    ``u_<joint>`` columns, each driving its joint's valve (``valves``: joint -> component)."""
+    if experiment in EXCAVATOR_PROFILES:
+        prof = excavator_profile(experiment)
+        return (lambda t: {f"{valves[j]}.u": u for j, u in ((k[2:], u) for k, u in prof(t).items())}), prof.duration
+    if experiment in PROFILES:
+        raise ValueError(f"{experiment!r} is a boom experiment; the whole excavator takes one of "
+                         f"{', '.join(EXCAVATOR_PROFILES)} or an excavator recording")
+    rec = read_recording(experiment)
+    if rec.kind != "excavator":
+        raise ValueError(f"{experiment}: a boom recording; the whole excavator replays an excavator recording "
+                         f"(u_swing, u_boom, u_arm, u_bucket)")
+    table = pd.DataFrame({"t": rec.data["t"], **{f"{valves[j]}.u": rec.data[f"u_{j}"] for j in JOINTS}})
+    return table, float(rec.data["t"].iloc[-1])
+
+
+def run_excavator(cosim, experiment: str, stop_time: float | None = None, progress: bool = False) -> pd.DataFrame:
+    """The whole excavator's run in the excavator recording's columns: ``t``, per joint
+    ``u_<j>``, ``p_a_<j>``, ``p_b_<j>`` (gauge [Pa]), ``angle_<j>``, then ``x_<j>``,
+    ``v_<j>`` and the tip force ``f_tip_x``, ``f_tip_y``, ``f_tip_z`` the linkage was
+    given (0 unless a parameter set drives it)."""
+    wiring = excavator_wiring(cosim)
+    inputs, duration = excavator_inputs(experiment, {j: w[2] for j, w in wiring.items()})
+    P_atm = bound_value(cosim, "P_atm")
+    result = cosim.simulate(stop_time if stop_time is not None else duration, inputs, progress=progress)
+    out = {"t": result["time"]}
+    for j, (link, cyl, valve) in wiring.items():
+        out[f"u_{j}"] = result[f"{valve}.u"]
+    for q in ("p_a", "p_b"):
+        for j, (link, cyl, valve) in wiring.items():
+            out[f"{q}_{j}"] = result[f"{cyl}.{q}"] - P_atm
+    for q in ("angle", "x", "v"):
+        for j, (link, cyl, valve) in wiring.items():
+            out[f"{q}_{j}"] = result[f"{link}.{q}_{j}"]
+    link = next(iter(wiring.values()))[0]
+    for c in "xyz":
+        name = f"{link}.f_tip_{c}"
+        out[f"f_tip_{c}"] = result[name] if name in result else 0.0
+    return pd.DataFrame(out)

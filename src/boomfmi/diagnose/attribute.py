@@ -26,7 +26,8 @@ and p_b.
 * **Pairs.**  Where no single effect explains the gap, or the best leaves a gap, pairs
   among the ``PAIR_POOL`` best singles are fitted jointly (:func:`_pairs`); each effect
   of a pair must pay for itself (remove ``MIN_SHRINK_SECOND`` of what the other alone
-  leaves), so that noise is not explained by a second effect.
+  leaves beyond the holdout's noise floor), so that noise is not explained by a second
+  effect.
 
 Decisions carry margins against the recordings' own noise:
 
@@ -351,7 +352,7 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
         # than the noise (the baseline's spread no longer counts: the best's fit has
         # moved the model off the baseline already)
         if best.shrink < MIN_SHRINK or sum(best.holdout.values()) > NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR:
-            pair = _pairs(cands, values, fit_recs, hold_recs, before, workers)
+            pair = _pairs(cands, values, fit_recs, hold_recs, before, workers, sum(noise.values()))
         if pair is not None:
             pair.score = round(min(1.0, pair.shrink / MIN_SHRINK), 4)
             verdict = pair.name.split("+")
@@ -365,14 +366,16 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     return att
 
 
-def _pairs(cands, values, fit_recs, hold_recs, before, workers):
+def _pairs(cands, values, fit_recs, hold_recs, before, workers, noise: float = 0.0):
     """The best pair of effects, where no single one explains the gap or the best leaves
     one beyond the noise.  Pairs are drawn among the PAIR_POOL candidates that helped
     most on their own (not only beside the best: two effects may each explain too
     little alone), fitted jointly from their single fits.  A pair is kept only if it
     removes MIN_SHRINK of the gap and each of its effects pays for itself: removes at
-    least MIN_SHRINK_SECOND of what the other one alone leaves (the penalty that keeps
-    noise from being explained by a second effect)."""
+    least MIN_SHRINK_SECOND of what the other one alone leaves beyond the noise (the
+    penalty that keeps noise from being explained by a second effect; ``noise``: the
+    holdout's noise floor summed over the channels, about the error a perfect model
+    still shows, which no effect can remove)."""
     pool = [c for c in cands if c.shrink > 0.0][:PAIR_POOL]
     by_name = {c.name: c for c in cands}
     # where the best explains the gap on its own, a pair must hold it (another pair
@@ -392,11 +395,17 @@ def _pairs(cands, values, fit_recs, hold_recs, before, workers):
         pair_names, fx, cost, after = fitted
         joint = job[1] if job[1] is not values else None
         cand = Candidate("+".join(pair_names), fx, cost, after, shrink(before, after), values=joint)
-        pays = all(shrink(by_name[other].holdout, after) >= MIN_SHRINK_SECOND
-                   for other in pair_names)
+        pays = all(_pays(by_name[other].holdout, after, noise) for other in pair_names)
         if cand.shrink >= MIN_SHRINK and pays and (best is None or cand.shrink > best.shrink):
             best = cand
     return best
+
+
+def _pays(single: dict, pair: dict, noise: float) -> bool:
+    """Whether a pair (its holdout NRMSE per channel) removes MIN_SHRINK_SECOND of what
+    its single effect's fit ``single`` leaves beyond the noise (``noise``: summed)."""
+    left, after = sum(single.values()), sum(pair.values())
+    return left > noise and left - after >= MIN_SHRINK_SECOND * (left - noise) and after < left
 
 
 def _fit_pair(args):

@@ -95,7 +95,11 @@ def pack_ssp(ssd: Path, fmu_dir: Path, out: Path) -> Path:
     tmp = out.with_suffix(".tmp")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
         z.write(ssd, "SystemStructure.ssd")
+        written = set()
         for source, component in referenced_sources(ssd):
+            if source in written:           # one FMU serving several components is packed once
+                continue
+            written.add(source)
             if not source.startswith("resources/"):
                 raise BuildError(f"{ssd}: source {source!r} must lie under resources/")
             name = source.removeprefix("resources/")

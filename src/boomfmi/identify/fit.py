@@ -511,10 +511,29 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
     F_s = float(w @ grid)
     lo_F = float(grid[min(np.searchsorted(cdf, 0.025), n_grid - 1)])
     hi_F = float(grid[min(np.searchsorted(cdf, 0.975), n_grid - 1)])
+    # starts that disagree beyond what each one's own evidence allows (a rest that was
+    # no rest, a start the sensor saw late, a static level that differs from start to
+    # start) leave the combined posterior falsely sharp: the interval is at least the
+    # spread of the starts' own levels (robust: 1.4826 times their median absolute
+    # deviation) over the root of their number
+    spread = start_spread([x["F_s_N"] for x in each])
+    if spread > 0.0:
+        half = 1.96 * spread / math.sqrt(len(each))
+        lo_F, hi_F = min(lo_F, F_s - half), max(hi_F, F_s + half)
     est = _widened("F_s", F_s, min(lo_F, F_s), max(hi_F, F_s))
     identified = hi_F < grid[-2] and est.relative_halfwidth < IDENTIFIED_WIDTH
     return est, identified, {"starts": len(events), "each": each, "lower_bound_N": lower,
                              "grid_N": [float(grid[0]), float(grid[-1])]}
+
+
+def start_spread(levels) -> float:
+    """The spread [N] of the static levels the starts put F_s at, each on its own: 1.4826
+    times their median absolute deviation (a standard deviation that a few stray starts
+    do not inflate); 0 with fewer than two starts."""
+    levels = np.asarray(levels, float)
+    if len(levels) < 2:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(levels - np.median(levels))))
 
 
 def _start_likelihood(moved: np.ndarray, readings: np.ndarray, reading: float, q: float, spread: float):

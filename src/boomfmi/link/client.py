@@ -12,8 +12,8 @@ import select
 import socket
 import time
 
-from .protocol import (BadMac, LinkError, Malformed, SampleDatagram, SequenceGuard, decode,
-                       encode_command, encode_status)
+from .protocol import (BadMac, ExcavatorSampleDatagram, LinkError, Malformed, SampleDatagram, SequenceGuard,
+                       decode, encode_command, encode_excavator_command, encode_status)
 
 
 def parse_address(url: str) -> tuple[str, int]:
@@ -58,9 +58,9 @@ class RigClient:
         except OSError:
             pass            # a refused or unreachable rig shows as a missing answer
 
-    def exchange(self, u: float | None, t: float, dt: float = 1e-3) -> SampleDatagram | None:
-        """Send a command (``u`` for the step from ``t`` to ``t + dt``) or, with
-        ``u=None``, a status request; return the rig's answer, or None when none arrives
+    def exchange(self, u, t: float, dt: float = 1e-3) -> SampleDatagram | ExcavatorSampleDatagram | None:
+        """Send a command (``u`` for the step from ``t`` to ``t + dt``: a number for the
+        boom, four for the excavator's valves) or, with ``u=None``, a status request; return the rig's answer, or None when none arrives
         within the timeout.  The first exchange opens a session (a status request of
         session 0) before a command can be sent."""
         deadline = time.perf_counter() + self.timeout
@@ -75,8 +75,12 @@ class RigClient:
                 return opened
         self.seq += 1
         seq = self.seq
-        self._send(encode_status(seq, t, self.key, self.session) if u is None
-                   else encode_command(seq, t, u, self.key, dt, self.session))
+        if u is None:
+            self._send(encode_status(seq, t, self.key, self.session))
+        elif isinstance(u, (int, float)):
+            self._send(encode_command(seq, t, u, self.key, dt, self.session))
+        else:
+            self._send(encode_excavator_command(seq, t, tuple(u), self.key, dt, self.session))
         return self._answer(seq, deadline)
 
     def _answer(self, seq: int, deadline: float) -> SampleDatagram | None:
@@ -104,7 +108,7 @@ class RigClient:
             except BadMac:
                 self.dropped["auth"] += 1
                 continue
-            if not isinstance(msg, SampleDatagram):
+            if not isinstance(msg, (SampleDatagram, ExcavatorSampleDatagram)):
                 self.dropped["malformed"] += 1
                 continue
             if msg.echo != seq or (self.session and msg.session != self.session):

@@ -1,6 +1,6 @@
 """The rig link protocol, version 2.
 
-Every datagram is exactly ``DATAGRAM_SIZE`` = 112 bytes: an 80-byte payload and its
+Every datagram of the boom is exactly ``DATAGRAM_SIZE`` = 112 bytes: an 80-byte payload and its
 HMAC-SHA256 (32 bytes) under a shared key.  Integers and floats are little-endian.
 
 Payload header (20 bytes), then the body, zero-padded to 80 bytes::
@@ -29,6 +29,19 @@ the :data:`MAX_SESSIONS` latest), is refused.  So a captured datagram replayed f
 another port is refused as a replay, and one replayed after its session has been
 forgotten as of an unknown session; forging a datagram of a new session needs the key.
 
+The excavator (``shared/spec/excavator.md``: four valves, eight pressures, four angles)
+adds two kinds, of the same version, header, sessions and MAC::
+
+    kind 4, excavator command (112 bytes, as the boom's):  u_swing, u_boom, u_arm,
+                   u_bucket f64 [V], dt f64 [s], session u32
+    kind 5, excavator sample (``EXCAVATOR_DATAGRAM_SIZE`` = 224 bytes: a 192-byte
+                   payload and its MAC): u_applied x 4, p_a x 4, p_b x 4 (Pa gauge),
+                   angle x 4 (rad), f_tip x 3 (N, world frame), f64 each in joint order
+                   swing, boom, arm, bucket; echo u32, rejected u32, session u32
+
+An excavator rig answers a status request with an excavator sample.  The size says
+which payload a datagram carries; a kind in a datagram of the other size is malformed.
+
 A receiver drops, and counts, a datagram of the wrong size, magic or version
 (malformed), one whose MAC does not verify (authentication), and one whose sequence
 number is not above the last accepted in its session (replay) or whose session is
@@ -50,6 +63,9 @@ PAYLOAD_SIZE = 80
 MAC_SIZE = 32
 DATAGRAM_SIZE = PAYLOAD_SIZE + MAC_SIZE
 COMMAND, SAMPLE, STATUS = 1, 2, 3
+EXCAVATOR_COMMAND, EXCAVATOR_SAMPLE = 4, 5
+EXCAVATOR_PAYLOAD_SIZE = 192
+EXCAVATOR_DATAGRAM_SIZE = EXCAVATOR_PAYLOAD_SIZE + MAC_SIZE
 FAILSAFE, LOCKSTEP = 1, 2
 KEY_ENV = "BOOMFMI_LINK_KEY"
 MIN_KEY_BYTES = 16
@@ -60,6 +76,8 @@ _HEADER = struct.Struct("<2sBBIId")
 _COMMAND = struct.Struct("<2sBBIIdddI")
 _STATUS = struct.Struct("<2sBBIIdI")
 _SAMPLE = struct.Struct("<2sBBIId6dIII")
+_EXCAVATOR_COMMAND = struct.Struct("<2sBBIId4ddI")
+_EXCAVATOR_SAMPLE = struct.Struct("<2sBBIId19dIII")
 
 
 class LinkError(Exception):
@@ -113,6 +131,40 @@ class SampleDatagram(NamedTuple):
         return bool(self.flags & LOCKSTEP)
 
 
+class ExcavatorCommand(NamedTuple):
+    """The four valve commands [V] (swing, boom, arm, bucket) for the step from ``t``."""
+    seq: int
+    t: float
+    u: tuple
+    dt: float = 1e-3
+    session: int = 0
+
+
+class ExcavatorSampleDatagram(NamedTuple):
+    """An excavator rig's sample as the link carries it: per joint (swing, boom, arm,
+    bucket) the command applied, the gauge pressures and the angle, and the true tip
+    force (world frame), with the link's fields as :class:`SampleDatagram`'s."""
+    seq: int
+    flags: int
+    t: float
+    u_applied: tuple
+    p_a: tuple
+    p_b: tuple
+    angle: tuple
+    f_tip: tuple
+    echo: int
+    rejected: int
+    session: int = 0
+
+    @property
+    def failsafe(self) -> bool:
+        return bool(self.flags & FAILSAFE)
+
+    @property
+    def lockstep(self) -> bool:
+        return bool(self.flags & LOCKSTEP)
+
+
 def load_key(key_file: str | os.PathLike | None = None, env: dict | None = None) -> bytes:
     """The shared key: the contents of ``key_file``, else ``$BOOMFMI_LINK_KEY``.
 
@@ -149,8 +201,8 @@ def verifies(payload: bytes, tag: bytes, key: bytes) -> bool:
     return hmac.compare_digest(tag, mac(payload, key))
 
 
-def _seal(payload: bytes, key: bytes) -> bytes:
-    payload = payload.ljust(PAYLOAD_SIZE, b"\0")
+def _seal(payload: bytes, key: bytes, size: int = PAYLOAD_SIZE) -> bytes:
+    payload = payload.ljust(size, b"\0")
     return payload + mac(payload, key)
 
 
@@ -169,12 +221,30 @@ def encode_sample(seq: int, flags: int, t: float, u_applied: float, p_a: float, 
                               alpha, f_ext, x, echo & 0xFFFFFFFF, rejected & 0xFFFFFFFF, session), key)
 
 
+def encode_excavator_command(seq: int, t: float, u, key: bytes, dt: float = 1e-3, session: int = 0) -> bytes:
+    """An excavator command: ``u`` the four valve commands [V] (swing, boom, arm, bucket)."""
+    return _seal(_EXCAVATOR_COMMAND.pack(MAGIC, VERSION, EXCAVATOR_COMMAND, seq, 0, t, *u, dt, session), key)
+
+
+def encode_excavator_sample(seq: int, flags: int, t: float, u_applied, p_a, p_b, angle, f_tip,
+                            echo: int, rejected: int, key: bytes, session: int = 0) -> bytes:
+    """An excavator sample: four each of u_applied, p_a, p_b, angle, and three of f_tip."""
+    return _seal(_EXCAVATOR_SAMPLE.pack(MAGIC, VERSION, EXCAVATOR_SAMPLE, seq, flags, t, *u_applied, *p_a, *p_b,
+                                        *angle, *f_tip, echo & 0xFFFFFFFF, rejected & 0xFFFFFFFF, session),
+                 key, EXCAVATOR_PAYLOAD_SIZE)
+
+
 def decode(datagram: bytes, key: bytes):
-    """A :class:`Command`, :class:`StatusRequest` or :class:`SampleDatagram`; raises
+    """A :class:`Command`, :class:`StatusRequest`, :class:`SampleDatagram`,
+    :class:`ExcavatorCommand` or :class:`ExcavatorSampleDatagram`; raises
     :class:`Malformed` or :class:`BadMac`."""
-    if len(datagram) != DATAGRAM_SIZE:
-        raise Malformed(f"{len(datagram)} bytes, not {DATAGRAM_SIZE}")
-    payload, tag = datagram[:PAYLOAD_SIZE], datagram[PAYLOAD_SIZE:]
+    if len(datagram) == EXCAVATOR_DATAGRAM_SIZE:
+        size = EXCAVATOR_PAYLOAD_SIZE
+    elif len(datagram) == DATAGRAM_SIZE:
+        size = PAYLOAD_SIZE
+    else:
+        raise Malformed(f"{len(datagram)} bytes, not {DATAGRAM_SIZE} (or {EXCAVATOR_DATAGRAM_SIZE}: an excavator sample)")
+    payload, tag = datagram[:size], datagram[size:]
     if not verifies(payload, tag, key):
         raise BadMac("the MAC does not verify")
     magic, version, kind, seq, flags, t = _HEADER.unpack_from(payload)
@@ -187,9 +257,22 @@ def decode(datagram: bytes, key: bytes):
         return Command(seq, t, u, dt, session)
     if kind == STATUS:
         return StatusRequest(seq, t, _STATUS.unpack_from(payload)[6])
+    if (kind == EXCAVATOR_SAMPLE) != (size == EXCAVATOR_PAYLOAD_SIZE):
+        raise Malformed(f"kind {kind} in a datagram of {len(datagram)} bytes")
     if kind == SAMPLE:
         f = _SAMPLE.unpack_from(payload)
         return SampleDatagram(seq, flags, *f[5:])
+    if kind == EXCAVATOR_COMMAND:
+        f = _EXCAVATOR_COMMAND.unpack_from(payload)
+        u, dt, session = tuple(f[6:10]), f[10], f[11]
+        if not (all(math.isfinite(c) for c in u) and math.isfinite(dt) and 0.0 < dt <= 1.0):
+            raise Malformed("an excavator command whose u or dt is not a finite number (dt in (0, 1] s)")
+        return ExcavatorCommand(seq, t, u, dt, session)
+    if kind == EXCAVATOR_SAMPLE:
+        f = _EXCAVATOR_SAMPLE.unpack_from(payload)
+        v = f[6:25]
+        return ExcavatorSampleDatagram(seq, flags, t, tuple(v[0:4]), tuple(v[4:8]), tuple(v[8:12]),
+                                       tuple(v[12:16]), tuple(v[16:19]), *f[25:28])
     raise Malformed(f"unknown kind {kind}")
 
 

@@ -329,3 +329,200 @@ def load_config(source=None) -> RigConfig:
     return RigConfig(params=params, effects=effects, noise=noise, contact=contact,
                      disturbance=disturbance, seed=seed, x0=x0)
 
+
+
+# -- the whole excavator (shared/spec/excavator.md) -------------------------------------------
+#: Joints of the excavator's rig (``physics.excavator.JOINTS``).
+JOINTS = ("swing", "boom", "arm", "bucket")
+#: Supply and gas parameters an excavator configuration's ``params`` may override
+#: (shared by the four valves and cylinders).
+EXCAVATOR_PARAMETERS = {name: PARAMETERS[name] for name in ("P_s", "P_e", "k", "R", "T", "P_atm")}
+#: Parameters a joint's ``params`` may override (the defaults: its actuator in
+#: ``physics.excavator``); the bore, rod, stroke and mounting stay the machine's.
+JOINT_PARAMETERS = ("A_max", "V_a0", "V_b0", "K_v", "F_s", "F_d")
+#: Tip contacts: ``experiments.TipContact``'s two kinds and their keys (None: required).
+TIP_CONTACTS = {
+    "ground": {"ground_z": 0.0, "stiffness": None, "damping": 0.0, "friction": 0.0, "v_slip": 0.01},
+    "prescribed": {"force": None, "start": 0.0, "stop": None, "ramp": 0.0},
+}
+_EXCAVATOR_TOP = ("machine", "params", "joints", "noise", "contact", "payload", "seed")
+_JOINT_KEYS = ("params", "effects", "noise", "x0")
+
+
+@dataclass
+class ExcavatorConfig:
+    """What the excavator's virtual rig is: built by :func:`load_excavator_config`.
+
+    ``joints[j]`` holds, for each joint of :data:`JOINTS`: ``params`` (the joint's
+    parameter groups as the boom's config would give them, its actuator's values with the
+    overrides applied), ``effects`` (filled with their defaults), ``noise`` and ``x0``."""
+    params: dict = field(default_factory=dict)     #: supply and gas overrides
+    joints: dict = field(default_factory=dict)     #: joint -> {"params", "effects", "noise", "x0", "overrides"}
+    contact: dict | None = None                    #: tip contact (ground or prescribed)
+    payload: float = 0.0                           #: mass in the bucket [kg]
+    seed: int = 0                                  #: seed of the sensor noise
+
+
+def config_machine(source) -> str:
+    """``"excavator"`` or ``"boom"``: which rig a configuration (path, dict, RigConfig,
+    ExcavatorConfig or None) describes.  An excavator's says ``"machine": "excavator"``."""
+    if isinstance(source, ExcavatorConfig):
+        return "excavator"
+    if source is None or isinstance(source, RigConfig):
+        return "boom"
+    if isinstance(source, (str, os.PathLike)):
+        try:
+            with open(source, encoding="utf-8") as f:
+                source = json.load(f)
+        except (OSError, json.JSONDecodeError):
+            return "boom"           # load_config says what is wrong with it
+    if isinstance(source, dict) and source.get("machine") == "excavator":
+        return "excavator"
+    return "boom"
+
+
+def _noise(key: str, given: dict, base: dict) -> dict:
+    for name in given:
+        if name not in NOISE:
+            raise _err(f"{key}.{name}", f"unknown key (known: {', '.join(NOISE)})")
+    out = {}
+    for name in ("p_sigma", "alpha_sigma"):
+        out[name] = _number(f"{key}.{name}", given.get(name, base[name]))
+        _require(f"{key}.{name}", out[name] >= 0.0, "must be >= 0")
+    quant = given.get("quantise", base["quantise"])
+    _require(f"{key}.quantise", isinstance(quant, bool), f"must be true or false, got {quant!r}")
+    out["quantise"] = quant
+    return out
+
+
+def _tip_contact(data) -> dict:
+    contact = dict(_table("contact", data))
+    kind = contact.pop("type", None)
+    _require("contact.type", kind in TIP_CONTACTS,
+             f"an excavator's contact is at the bucket tip: one of {', '.join(TIP_CONTACTS)}, got {kind!r}")
+    keys = TIP_CONTACTS[kind]
+    for name in contact:
+        if name not in keys:
+            raise _err(f"contact.{name}", f"unknown key (known: {', '.join(keys)})")
+    out = {"type": kind}
+    if kind == "ground":
+        out.update(_fill("contact", contact, keys))
+        _require("contact.stiffness", out["stiffness"] > 0.0, "must be > 0 N/m")
+        for name in ("damping", "friction"):
+            _require(f"contact.{name}", out[name] >= 0.0, "must be >= 0")
+        _require("contact.v_slip", out["v_slip"] > 0.0, "must be > 0 m/s")
+    else:
+        force = contact.get("force")
+        _require("contact.force", isinstance(force, list) and len(force) == 3,
+                 f"must be three numbers [N] (x, y, z, world frame), got {force!r}")
+        out["force"] = [_number(f"contact.force[{i}]", f) for i, f in enumerate(force)]
+        out["start"] = _number("contact.start", contact.get("start", 0.0))
+        stop = contact.get("stop")
+        out["stop"] = None if stop is None else _number("contact.stop", stop)
+        _require("contact.stop", out["stop"] is None or out["stop"] > out["start"], "must come after start")
+        out["ramp"] = _number("contact.ramp", contact.get("ramp", 0.0))
+        _require("contact.ramp", out["ramp"] >= 0.0, "must be >= 0 s")
+    return out
+
+
+def load_excavator_config(source=None) -> ExcavatorConfig:
+    """A validated :class:`ExcavatorConfig` from a JSON file's path, a dict, an
+    ExcavatorConfig or None (effect-free, realistic noise, every piston at mid-stroke).
+
+    Keys: ``machine`` ("excavator"), ``params`` (supply and gas:
+    :data:`EXCAVATOR_PARAMETERS`), ``joints`` (joint -> ``params`` of
+    :data:`JOINT_PARAMETERS`, ``effects`` as the boom's, ``noise`` overriding the
+    machine's, ``x0`` [m]), ``noise`` (as the boom's), ``contact`` (at the bucket tip,
+    :data:`TIP_CONTACTS`), ``payload`` [kg] and ``seed``.  Every key is checked; an
+    unknown or invalid one raises ``ValueError`` naming it (``joints.arm.effects.
+    piston_leakage.A_leak``).  stribeck_friction's default breakaway force F_brk is
+    scaled by the joint's bore area relative to 32 mm, as its F_s is."""
+    from ..physics.excavator import Excavator
+    if source is None:
+        data = {"machine": "excavator"}
+    elif isinstance(source, ExcavatorConfig):
+        return source
+    elif isinstance(source, dict):
+        data = source
+    elif isinstance(source, (str, os.PathLike)):
+        try:
+            with open(source, encoding="utf-8") as f:
+                data = json.load(f)
+        except json.JSONDecodeError as e:
+            raise ValueError(f"rig config {os.fspath(source)}: not valid JSON: {e}") from None
+        if not isinstance(data, dict):
+            raise ValueError(f"rig config {os.fspath(source)}: must hold a JSON object")
+    else:
+        raise TypeError(f"load_excavator_config takes a path, a dict or None, not {type(source).__name__}")
+    for key in data:
+        if key not in _EXCAVATOR_TOP:
+            raise _err(key, f"unknown key (known: {', '.join(_EXCAVATOR_TOP)})")
+    _require("machine", data.get("machine", "excavator") == "excavator",
+             f"must be \"excavator\", got {data.get('machine')!r}")
+    params = {}
+    for name, value in _table("params", data.get("params") or {}).items():
+        if name not in EXCAVATOR_PARAMETERS:
+            raise _err(f"params.{name}", f"unknown parameter (known: {', '.join(EXCAVATOR_PARAMETERS)})")
+        params[name] = _number(f"params.{name}", value)
+    noise = _noise("noise", _table("noise", data.get("noise") or {}), NOISE)
+    given = _table("joints", data.get("joints") or {})
+    for name in given:
+        if name not in JOINTS:
+            raise _err(f"joints.{name}", f"unknown joint (known: {', '.join(JOINTS)})")
+    ex = Excavator()
+    joints = {}
+    for j in JOINTS:
+        key = f"joints.{j}"
+        jd = _table(key, given.get(j) or {})
+        for name in jd:
+            if name not in _JOINT_KEYS:
+                raise _err(f"{key}.{name}", f"unknown key (known: {', '.join(_JOINT_KEYS)})")
+        act = getattr(ex, j)
+        overrides = {}
+        for name, value in _table(f"{key}.params", jd.get("params") or {}).items():
+            if name not in JOINT_PARAMETERS:
+                raise _err(f"{key}.params.{name}", f"unknown parameter (known: {', '.join(JOINT_PARAMETERS)})")
+            overrides[name] = _number(f"{key}.params.{name}", value)
+        # the joint as the boom's configuration: its actuator's values, the supply's and
+        # gas's overrides; the triangle (c1, c2, l_min) as Eq. 12's a, b, l_min (h only
+        # matters for the boom's phi)
+        jp = dict(params, A_max=act.A_max, A_a=act.A_a, A_b=act.A_b, L=act.stroke, V_a0=act.V_a0,
+                  V_b0=act.V_b0, K_v=act.K_v, F_s=act.F_s, F_d=act.F_d, a=act.c1, b=act.c2,
+                  h=ex.boom_h if j == "boom" else 0.0, l_min=act.l_min)
+        jp.update(overrides)
+        try:
+            cfg = load_config({"params": jp})
+        except ValueError as e:
+            raise ValueError(str(e).replace("rig config: params.", f"rig config: {key}.params.")) from None
+        _, _, cyl, _, load, _ = model_parameters(cfg.params)
+        effects = {}
+        scale = (act.bore / reference_rig.bore) ** 2
+        for name, value in _table(f"{key}.effects", jd.get("effects") or {}).items():
+            if name not in EFFECTS:
+                raise _err(f"{key}.effects.{name}", f"unknown effect (known: {', '.join(EFFECTS)})")
+            if value is None or value is False:
+                continue
+            if value is True:
+                value = {}
+            defaults = dict(EFFECTS[name])
+            if name == "stribeck_friction":
+                defaults["F_brk"] = defaults["F_brk"] * scale
+            q = _fill(f"{key}.effects.{name}", _table(f"{key}.effects.{name}", value), defaults)
+            try:
+                _check_effect(name, q, load, cyl)
+            except ValueError as e:
+                raise ValueError(str(e).replace("rig config: effects.", f"rig config: {key}.effects.")) from None
+            effects[name] = q
+        jn = _noise(f"{key}.noise", _table(f"{key}.noise", jd.get("noise") or {}), noise)
+        x0 = _number(f"{key}.x0", jd.get("x0", 0.5 * act.stroke))
+        _require(f"{key}.x0", 0.0 <= x0 <= act.stroke, f"must lie within the stroke [0, {act.stroke:g}] m")
+        joints[j] = {"params": cfg.params, "overrides": overrides, "effects": effects, "noise": jn, "x0": x0}
+    contact = data.get("contact")
+    if contact is not None:
+        contact = _tip_contact(contact)
+    payload = _number("payload", data.get("payload", 0.0))
+    _require("payload", payload >= 0.0, "must be >= 0 kg")
+    seed = data.get("seed", 0)
+    _require("seed", isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0,
+             f"must be an integer >= 0, got {seed!r}")
+    return ExcavatorConfig(params=params, joints=joints, contact=contact, payload=payload, seed=seed)

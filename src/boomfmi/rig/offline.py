@@ -11,14 +11,22 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from .config import load_config
+from .config import config_machine, load_config
 from .plant import VirtualRig
 
 
 def run_offline(config, command: Callable[[float], dict], duration: float, dt: float = 1e-3) -> pd.DataFrame:
     """Step a virtual rig (``config``: see :func:`boomfmi.rig.load_config`) under
     ``command(t) -> {"u": V}`` for ``duration`` seconds; one row per sample, t0 included.
-    A row holds the sample measured at t and the command applied from t on."""
+    A row holds the sample measured at t and the command applied from t on.
+
+    An excavator's configuration (``"machine": "excavator"``) runs
+    :func:`boomfmi.rig.excavator.run_excavator_offline` instead: ``command(t)`` returns
+    ``{"u_<joint>": V}`` and the rows are in the excavator recording's columns, plus
+    the true tip force, x and v per joint."""
+    if config_machine(config) == "excavator":
+        from .excavator import run_excavator_offline
+        return run_excavator_offline(config, command, duration, dt)
     plant = VirtualRig(load_config(config))
     n = int(round(duration / dt))
     rows = np.empty((n + 1, 7))

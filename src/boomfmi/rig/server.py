@@ -10,6 +10,12 @@
   latest sample at once;
 * a **status request** is answered with the current sample without stepping.
 
+The plant is the boom's :class:`~boomfmi.rig.plant.VirtualRig` or the excavator's
+:class:`~boomfmi.rig.excavator.ExcavatorRig`: the latter takes excavator commands (four
+valve voltages) and answers with excavator samples (``link/protocol.py``, kinds 4 and
+5); a command of the other machine is ignored and counted as malformed.  The
+excavator's recording has its own columns (``rig.excavator.COLUMNS`` and failsafe).
+
 Datagrams that are malformed, fail authentication, belong to no open session or repeat
 an old sequence number of their session (link protocol version 2: replay protection per
 session, whatever port a datagram comes from) are ignored and counted.  **Watchdog**:
@@ -36,8 +42,8 @@ import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
 
-from ..link.protocol import (FAILSAFE, LOCKSTEP, MAX_SESSIONS, BadMac, Command, Malformed,
-                             SequenceGuard, StatusRequest, decode, encode_sample)
+from ..link.protocol import (FAILSAFE, LOCKSTEP, MAX_SESSIONS, BadMac, Command, ExcavatorCommand, Malformed,
+                             SequenceGuard, StatusRequest, decode, encode_excavator_sample, encode_sample)
 from ..physics import reference_rig
 from ..recording import RecordingWriter
 
@@ -79,19 +85,31 @@ class RigServer:
         self.sock.setblocking(False)
         self.port = self.sock.getsockname()[1]
         self.counters = Counters()
-        self.u_cmd = reference_rig.u_centre
+        #: an excavator's rig (four valves) rather than the boom's
+        self.excavator = getattr(plant, "JOINTS", None) is not None
+        self.centre = (reference_rig.u_centre,) * len(plant.JOINTS) if self.excavator else reference_rig.u_centre
+        self.u_cmd = self.centre
         self.last_command_wall = time.perf_counter()
         self.last_command_t: dict = {}           # per session: the time of its last command
         self.failsafe = False
         self.seq = 0
         self.sample = plant.measure()
-        self.writer = RecordingWriter(record, COLUMNS) if record else None
+        if self.excavator:
+            from .excavator import COLUMNS as EXCAVATOR_COLUMNS
+            columns = (*EXCAVATOR_COLUMNS, "failsafe")
+        else:
+            columns = COLUMNS
+        self.writer = RecordingWriter(record, columns) if record else None
         self._stop = False
 
     # -- the plant ---------------------------------------------------------------------------
     def _record(self, s, u: float) -> None:
         if self.writer:
-            self.writer.write((s.t, u, s.p_a, s.p_b, s.alpha, s.f_ext, s.x, float(self.failsafe)))
+            if self.excavator:
+                from .excavator import sample_row
+                self.writer.write((*sample_row(s, u), float(self.failsafe)))
+            else:
+                self.writer.write((s.t, u, s.p_a, s.p_b, s.alpha, s.f_ext, s.x, float(self.failsafe)))
 
     def _watchdog(self, now: float) -> None:
         if not self.failsafe and now - self.last_command_wall > self.watchdog:
@@ -100,7 +118,7 @@ class RigServer:
 
     def _advance(self, dt: float | None = None) -> None:
         """Record the current sample with the command applied from now, then step."""
-        u = reference_rig.u_centre if self.failsafe else self.u_cmd
+        u = self.centre if self.failsafe else self.u_cmd
         self._record(self.sample, u)
         self.sample = self.plant.step(u, dt or self.dt)
 
@@ -109,9 +127,14 @@ class RigServer:
         s = self.sample
         self.seq += 1
         flags = (FAILSAFE if self.failsafe else 0) | (LOCKSTEP if self.lockstep else 0)
+        if self.excavator:
+            datagram = encode_excavator_sample(self.seq, flags, s.t, s.u_applied, s.p_a, s.p_b, s.angle, s.f_tip,
+                                               echo, self.counters.rejected, self.key, session)
+        else:
+            datagram = encode_sample(self.seq, flags, s.t, s.u_applied, s.p_a, s.p_b, s.alpha,
+                                     s.f_ext, s.x, echo, self.counters.rejected, self.key, session)
         try:
-            self.sock.sendto(encode_sample(self.seq, flags, s.t, s.u_applied, s.p_a, s.p_b, s.alpha,
-                                           s.f_ext, s.x, echo, self.counters.rejected, self.key, session), addr)
+            self.sock.sendto(datagram, addr)
         except OSError:
             pass
 
@@ -125,7 +148,7 @@ class RigServer:
         except BadMac:
             c.rejected_auth += 1
             return
-        if not isinstance(msg, (Command, StatusRequest)):
+        if not isinstance(msg, (ExcavatorCommand if self.excavator else Command, StatusRequest)):
             c.rejected_malformed += 1
             return
         session = msg.session
@@ -149,7 +172,10 @@ class RigServer:
             self._reply(addr, msg.seq, session)
             return
         c.commands += 1
-        self.u_cmd = min(max(msg.u, reference_rig.u_min), reference_rig.u_max)
+        if self.excavator:
+            self.u_cmd = tuple(min(max(u, reference_rig.u_min), reference_rig.u_max) for u in msg.u)
+        else:
+            self.u_cmd = min(max(msg.u, reference_rig.u_min), reference_rig.u_max)
         self.last_command_wall = time.perf_counter()
         self.failsafe = False
         if self.lockstep:
@@ -207,7 +233,7 @@ class RigServer:
 
     def close(self) -> None:
         if self.writer:
-            self._record(self.sample, reference_rig.u_centre if self.failsafe else self.u_cmd)
+            self._record(self.sample, self.centre if self.failsafe else self.u_cmd)
             self.writer.close()
             self.writer = None
         self.sock.close()

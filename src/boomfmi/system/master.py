@@ -385,8 +385,14 @@ SHARED = ("L", "A_a", "A_b", "V_a0", "V_b0", "a", "b", "h", "l_min", "P_atm")
 
 
 def check_shared(structure: SystemStructure, instances: Mapping[str, FmuInstance]) -> None:
-    """Raise :class:`SspError` where two components hold different values of one of
-    :data:`SHARED` (bound, or else the FMU's start value)."""
+    """Raise :class:`SspError` where two components that a connection joins hold
+    different values of one of :data:`SHARED` (bound, or else the FMU's start value).
+
+    Only joined components are compared: in the boom the cylinder and the boom load
+    are one cylinder, while in the whole excavator each joint's cylinder has its own
+    stroke and areas (``cylinder_boom.L`` and ``cylinder_arm.L`` differ rightly)."""
+    pairs = {tuple(sorted((c.start_element, c.end_element))) for c in structure.connections
+             if c.start_element in instances and c.end_element in instances and c.start_element != c.end_element}
     for name in SHARED:
         seen: dict[str, float] = {}
         for comp, inst in instances.items():
@@ -395,10 +401,11 @@ def check_shared(structure: SystemStructure, instances: Mapping[str, FmuInstance
                 continue
             bound = structure.parameters.get(f"{comp}.{name}")
             seen[comp] = float(bound.value if bound is not None else var.start)
-        if len(set(seen.values())) > 1:
-            listed = ", ".join(f"{c}.{name} = {v:g}" for c, v in seen.items())
-            raise SspError(f"{name} is one quantity of the machine but the components disagree: {listed}; "
-                           f"set every one of them")
+        for a, b in sorted(pairs):
+            if a in seen and b in seen and seen[a] != seen[b]:
+                listed = ", ".join(f"{c}.{name} = {v:g}" for c, v in seen.items() if c in (a, b))
+                raise SspError(f"{name} is one quantity of the machine but the components disagree: {listed}; "
+                               f"set every one of them")
 
 
 def _as_list(parameters) -> list:

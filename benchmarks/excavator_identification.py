@@ -1,0 +1,51 @@
+"""Identification per joint and tip force estimation of the whole excavator, on the
+excavator virtual rig (effect-free, realistic sensors): prints each joint's identified
+K_v, F_s, F_d and the payload against the truth (digging cycle + excavator_excitation,
+payload 0.5 kg), then the tip force estimate's RMSE per axis as a share of the peak on
+the three contact scenarios of the digging cycle.
+
+    .venv/bin/python benchmarks/excavator_identification.py
+"""
+import time
+
+import numpy as np
+
+from boomfmi import experiments as E
+from boomfmi.identify.excavator import identify_excavator, true_values
+from boomfmi.physics.excavator_force import estimate_tip_force
+from boomfmi.rig.excavator import run_excavator_offline
+
+PAYLOAD = 0.5
+
+
+def main():
+    t0 = time.perf_counter()
+    recs = [run_excavator_offline({"machine": "excavator", "payload": PAYLOAD}, c, c.duration)
+            for c in (E.digging_cycle(), E.excavator_excitation())]
+    t1 = time.perf_counter()
+    result = identify_excavator(recs)
+    t2 = time.perf_counter()
+    truth = true_values(payload=PAYLOAD)
+    print(f"identification (rig {t1 - t0:.0f} s, fit {t2 - t1:.0f} s)")
+    for k, e in result.params.items():
+        err = 100.0 * (e.value - truth[k]) / truth[k]
+        print(f"  {k:12s} {e.value:10.4g} {e.unit:6s} true {truth[k]:10.4g}  error {err:+7.2f} %  "
+              f"95 % [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]")
+    for w in result.warnings:
+        print("  warning:", w)
+    print("tip force estimate (per-joint observers, least squares over J^T)")
+    for name in ("prescribed_push", "soft_soil", "hard_soil"):
+        cmd = E.digging_cycle()
+        d = run_excavator_offline({"machine": "excavator", "contact": E.contact(name).config()}, cmd, cmd.duration)
+        f, res = estimate_tip_force(d)
+        ft = d[["f_tip_x", "f_tip_y", "f_tip_z"]].to_numpy()
+        parts = []
+        for k, c in enumerate("xyz"):
+            rmse = float(np.sqrt(np.mean((f[:, k] - ft[:, k]) ** 2)))
+            peak = float(np.max(np.abs(ft[:, k])))
+            parts.append(f"{c}: RMSE {rmse:.2f} N / peak {peak:.1f} N = {100 * rmse / peak:.0f} %")
+        print(f"  {name:16s} " + "; ".join(parts) + f"; residual median {np.median(res):.2f} N.m")
+
+
+if __name__ == "__main__":
+    main()

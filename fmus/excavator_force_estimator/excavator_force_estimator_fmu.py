@@ -1,0 +1,107 @@
+"""excavator_force_estimator: the force of the environment on the excavator's bucket tip
+(a 3-vector, world frame) from the machine's measurements, and the joystick's force.
+
+Per-joint load observers (each cylinder's equation of motion through the four-joint
+linkage, read backwards from the measured pressures and angles with the identified
+friction per cylinder and the payload) combined into the tip force by least squares over
+the Jacobian transpose (four joints, three unknowns); ``residual`` is the misfit of the
+four equations [N m].  ``physics/excavator_force.py`` holds the physics.  The measured
+angles pass a critically damped second-order filter (``f_motion``), the pneumatic forces
+the same filter; the estimate then a first-order low-pass (``tau_est``).  ``f_reflect_*``,
+the joystick's 3-axis force command, is ``gain * f_est`` per axis, saturated to
++-``f_max`` and rate-limited to ``rate_max``.  All outputs are states updated once per
+communication step (no direct feedthrough).
+"""
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from boomfmi_excavator_force_estimator_lib.fmislave import BoomSlave, input, output, parameter
+from boomfmi_excavator_force_estimator_lib.physics import reference_rig
+from boomfmi_excavator_force_estimator_lib.physics.excavator import JOINTS, Excavator, check_excavator
+from boomfmi_excavator_force_estimator_lib.physics.excavator_force import (observer_start, observer_step,
+                                                                           reflected_force_3d)
+from boomfmi_excavator_force_estimator_lib.physics.validation import require_non_negative, require_positive
+
+_EX = Excavator()
+_AXES = "xyz"
+
+
+def _friction(joint):
+    a = getattr(_EX, joint)
+    return [parameter(f"K_v_{joint}", a.K_v, "N.s/m", f"{joint} cylinder viscous friction coefficient (Eq. 8)", min=0.0),
+            parameter(f"F_s_{joint}", a.F_s, "N", f"{joint} cylinder static friction force (Eq. 9)", min=0.0),
+            parameter(f"F_d_{joint}", a.F_d, "N", f"{joint} cylinder Coulomb friction force (Eq. 9)", min=0.0)]
+
+
+class ExcavatorForceEstimator(BoomSlave):
+    description = ("Excavator tip force estimation: per-joint load observers combined by least squares over the "
+                   "Jacobian transpose, and 3-axis joystick force reflection")
+    variables = (
+        *(v for j in JOINTS for v in (
+            input(f"p_a_{j}", 0.0, "Pa", f"measured pressure in the {j} cylinder's chamber A (cap side), gauge"),
+            input(f"p_b_{j}", 0.0, "Pa", f"measured pressure in the {j} cylinder's chamber B (rod side), gauge"),
+            input(f"angle_{j}", float(_EX.actuators[JOINTS.index(j)].lower_limit + 0.5 * (
+                _EX.actuators[JOINTS.index(j)].upper - _EX.actuators[JOINTS.index(j)].lower_limit)), "rad",
+                  f"measured {j} joint angle (the recording's angle_{j})", min=-2 * math.pi, max=2 * math.pi))),
+        *(output(f"f_est_{c}", 0.0, "N", f"estimated force of the environment on the bucket tip, world {c}")
+          for c in _AXES),
+        *(output(f"f_reflect_{c}", 0.0, "N", f"joystick force command, axis {c}: gain * f_est_{c}, saturated and "
+                 "rate-limited") for c in _AXES),
+        output("residual", 0.0, "N.m", "misfit |J^T f - tau| of the four joints' torques to the estimated tip force",
+               min=0.0),
+        *(v for j in JOINTS for v in _friction(j)),
+        parameter("payload", 0.0, "kg", "payload in the bucket (identified)", min=0.0),
+        parameter("P_atm", reference_rig.P_atm, "Pa", "atmospheric pressure (gauge to absolute)", min=0.0),
+        parameter("f_motion", 30.0, "Hz", "corner frequency of the critically damped filter of the measured angles",
+                  min=0.0),
+        parameter("tau_est", 0.004, "s", "time constant of the estimate's low-pass; 0: none", min=0.0),
+        parameter("v_rest", 2e-3, "m/s", "below this filtered piston speed a cylinder counts as at rest", min=0.0),
+        parameter("rest_weight", 0.3, "1", "least-squares weight of a joint at rest (1: a sliding joint's)", min=0.0),
+        parameter("stop_weight", 0.02, "1", "least-squares weight of a joint at an end stop", min=0.0),
+        parameter("gain", 0.05, "1", "joystick force per estimated force", min=0.0),
+        parameter("f_max", 20.0, "N", "joystick force saturation, per axis", min=0.0),
+        parameter("rate_max", 500.0, "N/s", "joystick force rate limit, per axis", min=0.0),
+    )
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.modelName = "excavator_force_estimator"
+        self._f = np.zeros(3)
+        self._r = np.zeros(3)
+        self._res = 0.0
+        self._state = None
+
+    def setup(self):
+        for name in ("payload", "tau_est", "v_rest", "rest_weight", "stop_weight", "gain"):
+            require_non_negative(name, getattr(self, name))
+        for name in ("f_motion", "f_max", "rate_max", "P_atm"):
+            require_positive(name, getattr(self, name))
+        acts = {j: replace(getattr(_EX, j), K_v=getattr(self, f"K_v_{j}"), F_s=getattr(self, f"F_s_{j}"),
+                           F_d=getattr(self, f"F_d_{j}")) for j in JOINTS}
+        ex = replace(_EX, **acts, P_atm=self.P_atm)
+        check_excavator(ex)
+        self._ex = ex
+        self._omega = 2.0 * math.pi * self.f_motion
+        self._f = np.zeros(3)
+        self._r = np.zeros(3)
+        self._res = 0.0
+        self._state = None
+
+    def step(self, t, dt):
+        q = [getattr(self, f"angle_{j}") for j in JOINTS]
+        p_a = np.array([getattr(self, f"p_a_{j}") for j in JOINTS]) + self.P_atm
+        p_b = np.array([getattr(self, f"p_b_{j}") for j in JOINTS]) + self.P_atm
+        if self._state is None:             # the filters start at rest at the first measurement
+            self._state = observer_start(q, p_a, p_b, self._ex)
+        self._state, self._f, self._res, _ = observer_step(self._state, q, p_a, p_b, dt, self._omega, self._ex,
+                                                           self.payload, self.tau_est, self.v_rest,
+                                                           self.rest_weight, self.stop_weight)
+        self._r = reflected_force_3d(self._f, self._r, dt, self.gain, self.f_max, self.rate_max)
+
+
+for _i, _c in enumerate(_AXES):
+    setattr(ExcavatorForceEstimator, f"f_est_{_c}", property(lambda self, i=_i: float(self._f[i])))
+    setattr(ExcavatorForceEstimator, f"f_reflect_{_c}", property(lambda self, i=_i: float(self._r[i])))
+ExcavatorForceEstimator.residual = property(lambda self: float(self._res))

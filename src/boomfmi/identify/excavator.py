@@ -1,0 +1,275 @@
+"""Identification per joint of the whole excavator from its recordings.
+
+The linkage's rigid-body dynamics are known (``physics.excavator``: geometry, link
+masses); the unknowns are each cylinder's Eq. 9 friction (K_v, F_s, F_d) and the mass
+of the payload in the bucket.  In piston coordinates (``physics.excavator.
+piston_dynamics``) every joint's equation of motion is::
+
+    M_x(x, m) x'' + bias(x, x', m) = F_p - K_v x' - F_c + lam J^T f_tip
+
+with F_p the pneumatic forces from the recorded pressures, ``lam = dq/dx`` and M_x and
+the bias (Coriolis, centrifugal, gravity) affine in the payload m (a point mass at the
+bucket's centre of mass: ``M_x(m) = M_x(0) + m (M_x(1) - M_x(0))``).  F_c is
+``F_d scale dir`` while the cylinder slides (scale = cos(phi) for the boom,
+``physics.excavator.friction_scale``) and whatever holds it while it rests.
+
+Three stages, as the boom's (``identify.fit``):
+
+1. **Equation error over every sample** (:func:`equation_rows`): each joint's samples
+   are classified as sliding or resting from its own position (``fit.motion_modes``);
+   the equation, multiplied by the sliding indicator s (a resting row is 0 = 0, as
+   the boom's), is linear in theta = (K_v, F_d per cylinder, m)::
+
+       K_v G[x'] + F_d G[s scale dir] + m G[s dD] = G[s (F_p - D0 + lam J^T f)]
+
+   with D0 = M_x(0) x'' + bias(0) and dD = the payload's share per kg, evaluated from
+   the position low-passed at the preparation's cut-off and every term then passed
+   through the same zero-phase state-variable filter G; rows of every joint of every
+   recording stacked, each joint weighted by the inverse of its residual's spread
+   (two passes), samples near an impact on a stop left out.  Intervals from a
+   moving-block bootstrap, widened by ``fit.SYSTEMATIC``.
+2. **Static friction from every start** per joint: each joint becomes an equivalent
+   single cylinder (unit areas, the net force on it of everything but its own
+   friction and inertia, its diagonal mass ``M_x[i, i]``) and the boom's stage 3
+   (``fit.static_friction``) reads its starts.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import physics as ph
+from ..physics import excavator as exc
+from .fit import (SYSTEMATIC, Estimate, FitResult, REACH, motion, motion_modes, static_friction, _widened)
+from .preprocess import CUTOFF, Prepared, lowpass
+
+JOINTS = exc.JOINTS
+#: Cut-off [Hz] of the state-variable filter G of the equation error (the boom's EE_CUTOFF).
+EE_CUTOFF = 10.0
+#: Parameters per joint, and the payload's name.
+JOINT_PARAMS = ("K_v", "F_s", "F_d")
+UNITS = {"K_v": "N.s/m", "F_s": "N", "F_d": "N", "payload": "kg"}
+SYSTEMATIC_PAYLOAD = 0.02
+
+
+@dataclass
+class JointData:
+    """One recording's joint, ready for every stage."""
+    p: Prepared                #: the joint as an equivalent single cylinder (unit areas; F_net as p_a - P_atm)
+    modes: object              #: fit.Modes of its position
+    F_p: np.ndarray            #: pneumatic force [N], from the raw pressures
+    scale: np.ndarray          #: Eq. 9's factor (cos(phi) for the boom, 1 otherwise)
+    D0: np.ndarray             #: M_x(0) x'' + bias(0) - lam J^T f_tip [N] (25 Hz signals)
+    dD: np.ndarray             #: the payload's share per kg [N/kg]
+    own0: np.ndarray           #: the joint's own inertia M_x[i,i](0) x''_i [N]
+    down: np.ndarray           #: its payload share per kg [N/kg]
+    Mii0: np.ndarray           #: M_x[i, i] at no payload [kg]
+    dMii: np.ndarray           #: per kg of payload
+    L: float
+
+
+def _frame(rec):
+    """The recording's data as a DataFrame (a Recording or a DataFrame)."""
+    return rec.data if hasattr(rec, "data") else rec
+
+
+def _P_atm(rec, ex):
+    return float(rec.P_atm) if hasattr(rec, "P_atm") else ex.P_atm
+
+
+def prepare_excavator(rec, ex: exc.Excavator = exc.Excavator(), cutoff: float = CUTOFF) -> list[JointData]:
+    """Filter an excavator recording (``Recording`` or DataFrame with the excavator's
+    columns, pressures gauge) and evaluate the linkage's known terms at every sample;
+    one :class:`JointData` per joint of :data:`JOINTS`."""
+    d = _frame(rec)
+    P_atm = _P_atm(rec, ex)
+    t = d["t"].to_numpy(float)
+    fs = 1.0 / float(np.median(np.diff(t)))
+    q_raw = np.column_stack([d[f"angle_{j}"].to_numpy(float) for j in JOINTS])
+    x_raw = exc.pistons_from_angles(q_raw, ex)
+    x = np.column_stack([lowpass(x_raw[:, i], fs, cutoff) for i in range(4)])
+    v = np.gradient(x, t, axis=0)
+    a = np.gradient(v, t, axis=0)
+    p_a = np.column_stack([d[f"p_a_{j}"].to_numpy(float) for j in JOINTS]) + P_atm
+    p_b = np.column_stack([d[f"p_b_{j}"].to_numpy(float) for j in JOINTS]) + P_atm
+    F_p = exc.cylinder_forces(p_a, p_b, ex)
+    f_tip = None
+    if all(c in d for c in ("f_tip_x", "f_tip_y", "f_tip_z")):
+        f_tip = d[["f_tip_x", "f_tip_y", "f_tip_z"]].to_numpy(float)
+        if not np.any(f_tip):
+            f_tip = None
+    n = len(t)
+    xc = np.clip(x, 0.0, ex.strokes)
+    D = np.empty((2, n, 4))
+    own = np.empty((2, n, 4))
+    Mii = np.empty((2, n, 4))
+    for k in range(n):
+        for m in (0, 1):
+            Mx, bias, lam = exc.piston_dynamics(xc[k], v[k], float(m), ex)
+            D[m, k] = Mx @ a[k] + bias
+            own[m, k] = np.diag(Mx) * a[k]
+            Mii[m, k] = np.diag(Mx)
+        if f_tip is not None:
+            q = exc.joint_angles(xc[k], ex)
+            tau = exc.tip_torques(q, f_tip[k], ex) / exc.lever_arms(xc[k], ex)
+            D[0, k] -= tau
+            D[1, k] -= tau
+    scale = exc.friction_scale(xc, ex)
+    phi_boom = ph.phi_from_x(xc[:, 1], ex.geometry)
+    out = []
+    for i, (j, act) in enumerate(zip(JOINTS, ex.actuators)):
+        F_net = F_p[:, i] - (D[0, :, i] - own[0, :, i])     # everything on it but its own inertia and friction
+        phi = phi_boom if j == "boom" else np.zeros(n)
+        p = Prepared(t=t, u=d[f"u_{j}"].to_numpy(float), p_a=lowpass(F_net, fs, cutoff) + P_atm,
+                     p_b=np.full(n, P_atm), x=x[:, i], v=v[:, i], a=a[:, i], phi=phi, x_raw=x_raw[:, i],
+                     p_a_raw=F_net + P_atm, p_b_raw=np.full(n, P_atm), fs=fs, cutoff=cutoff,
+                     source=f"{getattr(rec, 'path', '')}:{j}")
+        out.append(JointData(p=p, modes=motion_modes(p, act.stroke), F_p=F_p[:, i], scale=scale[:, i],
+                             D0=D[0, :, i], dD=D[1, :, i] - D[0, :, i], own0=own[0, :, i],
+                             down=own[1, :, i] - own[0, :, i], Mii0=Mii[0, :, i], dMii=Mii[1, :, i] - Mii[0, :, i],
+                             L=act.stroke))
+    return out
+
+
+def equation_rows(joints: list[JointData], cutoff: float = EE_CUTOFF):
+    """Stage 1's rows of one recording: ``(X, y, use, joint)`` with theta =
+    (K_v x4, F_d x4, payload) (see the module's docstring)."""
+    Xs, ys, uses, which = [], [], [], []
+    for i, jd in enumerate(joints):
+        p, modes = jd.p, jd.modes
+        G = lambda y: lowpass(y, p.fs, cutoff)
+        s = modes.sliding.astype(float)
+        xg = G(p.x_raw)
+        vg = np.gradient(xg, p.t)
+        n = len(p.t)
+        X = np.zeros((n, 9))
+        X[:, i] = vg
+        X[:, 4 + i] = G(s * jd.scale * modes.direction)
+        X[:, 8] = G(s * jd.dD)
+        y = G(s * (jd.F_p - jd.D0))
+        reach = int(REACH * p.fs / cutoff)
+        use = np.ones(n, bool)
+        use[:reach] = use[-reach:] = False
+        for k in modes.impacts:
+            use[max(0, k - reach):k + reach] = False
+        Xs.append(X)
+        ys.append(y)
+        uses.append(use)
+        which.append(np.full(n, i))
+    return np.vstack(Xs), np.concatenate(ys), np.concatenate(uses), np.concatenate(which)
+
+
+def _lstsq(X, y):
+    scale = np.abs(X).max(axis=0)
+    scale[scale == 0] = 1.0
+    th, *_ = np.linalg.lstsq(X / scale, y, rcond=None)
+    return th / scale
+
+
+def equation_error(data: list[list[JointData]], n_boot: int = 200, block: float = 0.1, seed: int = 0,
+                   cutoff: float = EE_CUTOFF):
+    """Stage 1 over every recording: estimates ``{"K_v_<joint>", "F_d_<joint>",
+    "payload"}`` and details."""
+    rows = [equation_rows(r, cutoff) for r in data]
+    X = np.vstack([r[0][r[2]] for r in rows])
+    y = np.concatenate([r[1][r[2]] for r in rows])
+    joint = np.concatenate([r[3][r[2]] for r in rows])
+    # the recordings' blocks: a block never spans two joints' rows
+    w = np.ones(len(y))
+    theta = _lstsq(X, y)
+    for _ in range(2):                       # each joint weighted by its residual's spread
+        res = y - X @ theta
+        for i in range(4):
+            sel = joint == i
+            sd = float(np.std(res[sel])) if sel.any() else 1.0
+            w[sel] = 1.0 / max(sd, 1e-9)
+        theta = _lstsq(X * w[:, None], y * w)
+    fs = data[0][0].p.fs
+    b = max(1, int(block * fs))
+    n = len(y)
+    rng = np.random.default_rng(seed)
+    starts = np.arange(0, max(1, n - b))
+    Xw, yw = X * w[:, None], y * w
+    boots = []
+    for _ in range(n_boot):
+        picks = rng.choice(starts, size=max(1, n // b))
+        idx = (picks[:, None] + np.arange(b)[None, :]).ravel()
+        idx = idx[idx < n]
+        boots.append(_lstsq(Xw[idx], yw[idx]))
+    lo, hi = np.percentile(np.array(boots), [2.5, 97.5], axis=0)
+    est = {}
+    for i, j in enumerate(JOINTS):
+        for k, name in ((i, "K_v"), (4 + i, "F_d")):
+            est[f"{name}_{j}"] = _widened(name, theta[k], min(lo[k], theta[k]), max(hi[k], theta[k]))
+    floor = SYSTEMATIC_PAYLOAD * abs(theta[8])
+    est["payload"] = Estimate(float(theta[8]), (float(min(lo[8], theta[8]) - floor),
+                                                float(max(hi[8], theta[8]) + floor)), "kg")
+    res = y - X @ theta
+    return est, {"samples": int(n), "condition_number": float(np.linalg.cond(Xw / np.abs(Xw).max(axis=0))),
+                 "rms_residual_N": {j: float(np.sqrt(np.mean(res[joint == i] ** 2))) for i, j in enumerate(JOINTS)}}
+
+
+def _equivalent(jd: JointData, payload: float) -> Prepared:
+    """The joint as a single cylinder with the payload's share in its net force."""
+    p = jd.p
+    extra = payload * (jd.dD - jd.down)
+    fs = p.fs
+    return Prepared(t=p.t, u=p.u, p_a=p.p_a - lowpass(extra, fs, p.cutoff), p_b=p.p_b, x=p.x, v=p.v, a=p.a,
+                    phi=p.phi, x_raw=p.x_raw, p_a_raw=p.p_a_raw - extra, p_b_raw=p.p_b_raw, fs=fs,
+                    cutoff=p.cutoff, source=p.source)
+
+
+def identify_excavator(recordings, ex: exc.Excavator = exc.Excavator(), cutoff: float = CUTOFF) -> FitResult:
+    """Each cylinder's K_v, F_s, F_d and the payload [kg] from excavator recordings
+    (``Recording`` objects or DataFrames with the excavator's columns), the linkage's
+    geometry and link masses ``ex`` known.  Parameters are named ``<name>_<joint>``
+    (``K_v_arm``) and ``payload``; see the module's docstring."""
+    data = [prepare_excavator(r, ex, cutoff) for r in recordings]
+    est, info = equation_error(data)
+    details = {"equation_error": info, "static_friction": {}}
+    warnings = []
+    payload = est["payload"].value
+    for i, j in enumerate(JOINTS):
+        act = ex.actuators[i]
+        cyl = ph.Cylinder(A_a=1.0, A_b=1.0, L=act.stroke, V_a0=act.V_a0, V_b0=act.V_b0)
+        P_atm = ex.P_atm
+        motions = [motion(_equivalent(r[i], payload), cyl, P_atm) for r in data]
+        M = float(np.median(np.concatenate([r[i].Mii0 + payload * r[i].dMii for r in data])))
+        base = {"M": M, "K_v": est[f"K_v_{j}"].value, "F_d": est[f"F_d_{j}"].value, "F_L": 0.0}
+        F_s, identified, info3 = static_friction(motions, base, cyl, P_atm)
+        details["static_friction"][j] = dict(info3, identified=bool(identified))
+        if F_s is None:
+            warnings.append(f"{j}: no start of motion from rest: F_s_{j} cannot be identified; F_d is used")
+            F_s = Estimate(base["F_d"], (math.nan, math.nan), "N")
+        elif not identified:
+            warnings.append(f"{j}: the starts put F_s_{j} anywhere in [{F_s.ci95[0]:.4g}, {F_s.ci95[1]:.4g}] N")
+        est[f"F_s_{j}"] = F_s
+    for k, e in est.items():
+        if not k.startswith("F_s") and not e.relative_halfwidth < 0.5 and k != "payload":
+            warnings.append(f"the data cannot identify {k}: its 95 % interval "
+                            f"[{e.ci95[0]:.4g}, {e.ci95[1]:.4g}] {e.unit} is wider than half its value")
+    ordered = {f"{n}_{j}": est[f"{n}_{j}"] for j in JOINTS for n in JOINT_PARAMS}
+    ordered["payload"] = est["payload"]
+    return FitResult("fit-excavator", ordered, warnings, details)
+
+
+def identified_machine(result: FitResult, ex: exc.Excavator = exc.Excavator()):
+    """``(Excavator, payload)`` with the identified friction per cylinder."""
+    from dataclasses import replace
+    v = result.values()
+    changes = {j: replace(getattr(ex, j), K_v=v[f"K_v_{j}"], F_d=v[f"F_d_{j}"],
+                          F_s=max(v[f"F_s_{j}"], v[f"F_d_{j}"])) for j in JOINTS}
+    return replace(ex, **changes), max(0.0, v["payload"])
+
+
+def true_values(ex: exc.Excavator = exc.Excavator(), payload: float = 0.0) -> dict:
+    """The machine's own values under this module's names (for tests and benchmarks)."""
+    out = {f"{n}_{j}": getattr(a, n) for j, a in zip(JOINTS, ex.actuators) for n in JOINT_PARAMS}
+    out["payload"] = payload
+    return out
+
+
+__all__ = ["identify_excavator", "prepare_excavator", "equation_error", "identified_machine", "true_values",
+           "JOINTS", "UNITS"]

@@ -1,0 +1,135 @@
+"""Estimating the force of the environment on the excavator's bucket tip, and reflecting
+it to a 3-axis joystick.
+
+Per-joint observers (the boom's load observer of ``force_estimation.py``, through the
+linkage): each cylinder's equation of motion in piston coordinates
+(``excavator.piston_dynamics``) read backwards from what the machine measures::
+
+    lam_i (J^T f_tip)_i = (M_x x'' + bias)_i - F_p,i + friction_i
+
+with x, x', x'' from a critically damped filter of the measured angles (through
+Eq. 12 and the triangles to piston positions), F_p the pneumatic forces of the measured
+pressures through the same filter (the same delay on both sides), the bias the
+Coriolis, centrifugal and gravity forces, and friction Eq. 9's (``K_v v + F_d scale
+sign(v)`` while sliding).  At rest friction can hold anything up to ``F_s scale``;
+as the boom's observer, only what it cannot hold is reported.  Each joint's torque
+``tau_i`` = that force times its lever arm.
+
+The tip force (three unknowns) from the four joint torques by least squares over the
+Jacobian transpose, ``min |W (J^T f - tau)|``; the residual ``|J^T f - tau|`` [N m]
+says how far the four observers disagree (a force elsewhere than at the tip, or a
+model error, shows there).  A joint that rests (its torque only known to within its
+static friction) counts with weight ``rest_weight``, one at an end stop (a force towards
+the stop unknown) with ``stop_weight``.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import excavator as exc
+from .force_estimation import motion_filter_step, reflected_force
+from .lag import first_order_step
+
+
+def observed_joint_torques(x, v, a, drive, ex: exc.Excavator = exc.Excavator(), payload: float = 0.0,
+                           v_rest: float = 2e-3, x_stop: float = 5e-4):
+    """The joint torques [N m] the environment exerts (``J^T f_tip`` if all of it is at
+    the tip), from the pistons' position ``x`` [m], velocity ``v`` [m/s], acceleration
+    ``a`` [m/s^2] and the pneumatic forces ``drive`` [N] (4-vectors).  Returns
+    ``(tau, resting, at_stop)``: resting[i] is True where the cylinder counted as at
+    rest (its torque then is only what static friction cannot hold), at_stop[i] where
+    it is within ``x_stop`` [m] of an end stop (a force towards the stop is the stop's
+    reaction and is not reported)."""
+    x = np.clip(np.asarray(x, float), 0.0, ex.strokes)
+    v = np.asarray(v, float)
+    Mx, bias, lam = exc.piston_dynamics(x, v, payload, ex)
+    g0 = Mx @ np.asarray(a, float) + bias - np.asarray(drive, float)
+    scale = exc.friction_scale(x, ex)
+    gap = np.empty(4)
+    resting = np.abs(v) <= v_rest
+    for i, act in enumerate(ex.actuators):
+        if resting[i]:
+            hold = act.F_s * scale[i]
+            gap[i] = g0[i] + max(-hold, min(hold, -g0[i]))
+        else:
+            gap[i] = g0[i] + act.K_v * v[i] + math.copysign(act.F_d * scale[i], v[i])
+    at_stop = (x <= x_stop) | (x >= ex.strokes - x_stop)
+    gap = np.where(x <= x_stop, np.minimum(gap, 0.0), gap)
+    gap = np.where(x >= ex.strokes - x_stop, np.maximum(gap, 0.0), gap)
+    return gap / lam, resting, at_stop
+
+
+def tip_force_from_torques(q, tau, weights=None, ex: exc.Excavator = exc.Excavator()):
+    """The tip force [N] (world frame) whose ``J(q)^T f`` best matches the joint torques
+    ``tau`` [N m] (weighted least squares, ``weights`` per joint, default 1), and the
+    residual ``|J^T f - tau|`` [N m] (unweighted) of the four equations."""
+    JT = exc.tip_jacobian(q, ex).T
+    tau = np.asarray(tau, float)
+    w = np.ones(4) if weights is None else np.asarray(weights, float)
+    f, *_ = np.linalg.lstsq(JT * w[:, None], tau * w, rcond=None)
+    return f, float(np.linalg.norm(JT @ f - tau))
+
+
+def observer_start(angles, p_a, p_b, ex: exc.Excavator = exc.Excavator()):
+    """The observer's state at its first measurement (``angles`` [rad], absolute
+    pressures [Pa]): filters at rest there, no force."""
+    x = exc.pistons_from_angles(np.asarray(angles, float), ex)
+    F = exc.cylinder_forces(p_a, p_b, ex)
+    return {"x": x, "v": np.zeros(4), "F": F, "dF": np.zeros(4), "f": np.zeros(3)}
+
+
+def observer_step(state: dict, angles, p_a, p_b, dt: float, omega: float, ex: exc.Excavator = exc.Excavator(),
+                  payload: float = 0.0, tau_est: float = 0.004, v_rest: float = 2e-3, rest_weight: float = 0.3,
+                  stop_weight: float = 0.02):
+    """One step of the excavator's tip-force observer with the measurements held over
+    ``dt`` [s]: joint ``angles`` [rad], absolute pressures [Pa] (4-vectors); ``omega``
+    [rad/s] the filters' corner.  Returns ``(state, f_est, residual, tau)``: the new
+    state, the tip force [N] after the first-order low-pass ``tau_est`` [s], the
+    least-squares residual [N m] and the joint torques [N m]."""
+    xm = exc.pistons_from_angles(np.asarray(angles, float), ex)
+    Fm = exc.cylinder_forces(p_a, p_b, ex)
+    xs, vs, v_mean, a_mean = [], [], np.empty(4), np.empty(4)
+    F_new, dF_new, F_mid = np.empty(4), np.empty(4), np.empty(4)
+    for i in range(4):
+        x1, v1, v_mean[i], a_mean[i] = motion_filter_step(state["x"][i], state["v"][i], xm[i], dt, omega)
+        xs.append(x1)
+        vs.append(v1)
+        F1, dF1, _, _ = motion_filter_step(state["F"][i], state["dF"][i], Fm[i], dt, omega)
+        F_mid[i] = 0.5 * (state["F"][i] + F1)
+        F_new[i], dF_new[i] = F1, dF1
+    x_mid = 0.5 * (np.asarray(state["x"]) + np.asarray(xs))
+    tau, resting, at_stop = observed_joint_torques(x_mid, v_mean, a_mean, F_mid, ex, payload, v_rest)
+    q = exc.joint_angles(np.clip(x_mid, 0.0, ex.strokes), ex)
+    w = np.where(at_stop, stop_weight, np.where(resting, rest_weight, 1.0))
+    f, residual = tip_force_from_torques(q, tau, w, ex)
+    f_est = np.array([first_order_step(state["f"][k], f[k], dt, tau_est) for k in range(3)])
+    new = {"x": np.asarray(xs), "v": np.asarray(vs), "F": F_new, "dF": dF_new, "f": f_est}
+    return new, f_est, residual, tau
+
+
+def reflected_force_3d(f_est, f_prev, dt, gain, f_max, rate_max):
+    """The joystick's force command [N], a 3-vector: :func:`force_estimation.reflected_force`
+    per axis (scaled by ``gain``, saturated to +-``f_max``, rate-limited to ``rate_max``)."""
+    return np.array([reflected_force(float(f_est[k]), float(f_prev[k]), dt, gain, f_max, rate_max)
+                     for k in range(3)])
+
+
+def estimate_tip_force(data, ex: exc.Excavator = exc.Excavator(), payload: float = 0.0, f_motion: float = 30.0,
+                       tau_est: float = 0.004, v_rest: float = 2e-3, rest_weight: float = 0.3, stop_weight: float = 0.02, P_atm=None):
+    """The observer run over an excavator recording (a DataFrame with its columns,
+    pressures gauge): arrays ``f`` (n, 3) [N] and ``residual`` (n,) [N m]."""
+    P_atm = ex.P_atm if P_atm is None else P_atm
+    t = data["t"].to_numpy(float)
+    Q = np.column_stack([data[f"angle_{j}"].to_numpy(float) for j in exc.JOINTS])
+    PA = np.column_stack([data[f"p_a_{j}"].to_numpy(float) for j in exc.JOINTS]) + P_atm
+    PB = np.column_stack([data[f"p_b_{j}"].to_numpy(float) for j in exc.JOINTS]) + P_atm
+    omega = 2.0 * math.pi * f_motion
+    state = observer_start(Q[0], PA[0], PB[0], ex)
+    f = np.zeros((len(t), 3))
+    res = np.zeros(len(t))
+    for k in range(1, len(t)):
+        state, f[k], res[k], _ = observer_step(state, Q[k], PA[k], PB[k], t[k] - t[k - 1], omega, ex, payload,
+                                               tau_est, v_rest, rest_weight, stop_weight)
+    return f, res

@@ -1,0 +1,90 @@
+"""Identification per joint and the tip force estimate of the whole excavator, on the
+excavator virtual rig's recordings (effect-free, realistic sensors)."""
+import math
+
+import numpy as np
+import pytest
+
+from boomfmi import experiments as E
+from boomfmi.identify.excavator import identify_excavator, true_values
+from boomfmi.physics.excavator_force import estimate_tip_force
+from boomfmi.rig.excavator import run_excavator_offline
+
+PAYLOAD = 0.5
+
+
+@pytest.fixture(scope="module")
+def identified():
+    recs = []
+    for cmd in (E.digging_cycle(), E.excavator_excitation()):
+        recs.append(run_excavator_offline({"machine": "excavator", "payload": PAYLOAD}, cmd, cmd.duration))
+    return identify_excavator(recs), true_values(payload=PAYLOAD)
+
+
+def _err(result, truth, name):
+    return abs(result.params[name].value - truth[name]) / truth[name]
+
+
+@pytest.mark.parametrize("name", ["K_v_swing", "F_d_swing", "K_v_boom", "F_d_boom", "K_v_arm", "F_d_arm",
+                                  "F_s_arm", "payload"])
+def test_identified_within_5_percent(identified, name):
+    result, truth = identified
+    assert _err(result, truth, name) < 0.05, (name, result.params[name], truth[name])
+    lo, hi = result.params[name].ci95
+    assert lo < result.params[name].value < hi
+
+
+@pytest.mark.xfail(strict=True, reason="the bucket moves ~6 % of the time, in fast runs to its stops: K_v and F_d "
+                                       "are confounded (measured +18 % / -48 %); F_s of swing, boom and bucket "
+                                       "from the starts within 10 to 24 % only")
+@pytest.mark.parametrize("name", ["K_v_bucket", "F_d_bucket", "F_s_swing", "F_s_boom", "F_s_bucket"])
+def test_identified_within_5_percent_not_yet(identified, name):
+    result, truth = identified
+    assert _err(result, truth, name) < 0.05
+
+
+@pytest.fixture(scope="module")
+def push():
+    cmd = E.digging_cycle()
+    return run_excavator_offline({"machine": "excavator", "contact": E.contact("prescribed_push").config()},
+                                 cmd, cmd.duration)
+
+
+@pytest.mark.xfail(strict=True, reason="per-joint observers: joints resting or at their stops hide the push "
+                                       "within their static friction / the stop's reaction (measured RMSE "
+                                       "60 to 170 % of the peak per axis)")
+def test_tip_force_rmse_within_10_percent_of_peak(push):
+    f, _ = estimate_tip_force(push)
+    ft = push[["f_tip_x", "f_tip_y", "f_tip_z"]].to_numpy()
+    for k in range(3):
+        assert np.sqrt(np.mean((f[:, k] - ft[:, k]) ** 2)) < 0.1 * np.max(np.abs(ft[:, k]))
+
+
+def test_fmu_matches_physics_and_validates(push, capfd):
+    fmpy = pytest.importorskip("fmpy")
+    from pathlib import Path
+    fmu = Path(__file__).resolve().parents[1] / "build" / "fmus" / "excavator_force_estimator.fmu"
+    if not fmu.exists():
+        pytest.skip("build the FMU first: build_fmus.py excavator_force_estimator")
+    from fmpy.validation import validate_fmu
+    assert validate_fmu(str(fmu)) == []
+    d = push.iloc[:1500]
+    names = [f"{q}_{j}" for j in ("swing", "boom", "arm", "bucket") for q in ("p_a", "p_b", "angle")]
+    inputs = np.zeros(len(d), dtype=[("time", float)] + [(n, float) for n in names])
+    inputs["time"] = d["t"].to_numpy()
+    for n in names:
+        inputs[n] = d[n].to_numpy()
+    res = fmpy.simulate_fmu(str(fmu), start_time=0.0, stop_time=float(d["t"].iloc[-1]), step_size=1e-3,
+                            output_interval=1e-3, input=inputs,
+                            output=["f_est_x", "f_est_y", "f_est_z", "f_reflect_z", "residual"])
+    f, _ = estimate_tip_force(d)
+    # the FMU's output at t_k holds the step that took the sample at t_(k-1): one step behind
+    n = min(len(res), len(f)) - 1
+    for k, c in enumerate("xyz"):
+        assert np.allclose(res[f"f_est_{c}"][1:n + 1], f[:n, k], atol=1e-6, rtol=1e-6) or \
+            np.allclose(res[f"f_est_{c}"][:n], f[:n, k], atol=1e-6, rtol=1e-6)
+    assert np.all(np.abs(res["f_reflect_z"]) <= 20.0 + 1e-9)
+    capfd.readouterr()
+    with pytest.raises(Exception):
+        fmpy.simulate_fmu(str(fmu), stop_time=0.01, step_size=1e-3, start_values={"f_motion": -1.0})
+    assert "f_motion" in capfd.readouterr().out
