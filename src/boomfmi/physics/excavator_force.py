@@ -34,14 +34,16 @@ from .lag import first_order_step
 
 
 def observed_joint_torques(x, v, a, drive, ex: exc.Excavator = exc.Excavator(), payload: float = 0.0,
-                           v_rest: float = 2e-3, x_stop: float = 5e-4):
+                           v_rest: float = 2e-3, x_stop: float = 5e-4, sliding=None):
     """The joint torques [N m] the environment exerts (``J^T f_tip`` if all of it is at
     the tip), from the pistons' position ``x`` [m], velocity ``v`` [m/s], acceleration
     ``a`` [m/s^2] and the pneumatic forces ``drive`` [N] (4-vectors).  Returns
     ``(tau, resting, at_stop)``: resting[i] is True where the cylinder counted as at
     rest (its torque then is only what static friction cannot hold), at_stop[i] where
     it is within ``x_stop`` [m] of an end stop (a force towards the stop is the stop's
-    reaction and is not reported)."""
+    reaction and is not reported).  ``sliding`` (optional, per joint -1, 0 or +1): a
+    joint with a non-zero entry counts as sliding that way, whatever ``v`` says (a slow
+    creep that the fast filter's speed, noisy with the angle sensor's steps, misses)."""
     x = np.clip(np.asarray(x, float), 0.0, ex.strokes)
     v = np.asarray(v, float)
     Mx, bias, lam = exc.piston_dynamics(x, v, payload, ex)
@@ -49,12 +51,15 @@ def observed_joint_torques(x, v, a, drive, ex: exc.Excavator = exc.Excavator(), 
     scale = exc.friction_scale(x, ex)
     gap = np.empty(4)
     resting = np.abs(v) <= v_rest
+    direction = np.sign(v) if sliding is None else np.where(np.asarray(sliding) != 0, np.sign(sliding), np.sign(v))
+    if sliding is not None:
+        resting = resting & (np.asarray(sliding) == 0)
     for i, act in enumerate(ex.actuators):
         if resting[i]:
             hold = act.F_s * scale[i]
             gap[i] = g0[i] + max(-hold, min(hold, -g0[i]))
         else:
-            gap[i] = g0[i] + act.K_v * v[i] + math.copysign(act.F_d * scale[i], v[i])
+            gap[i] = g0[i] + act.K_v * v[i] + direction[i] * act.F_d * scale[i]
     at_stop = (x <= x_stop) | (x >= ex.strokes - x_stop)
     gap = np.where(x <= x_stop, np.minimum(gap, 0.0), gap)
     gap = np.where(x >= ex.strokes - x_stop, np.maximum(gap, 0.0), gap)
@@ -72,22 +77,84 @@ def tip_force_from_torques(q, tau, weights=None, ex: exc.Excavator = exc.Excavat
     return f, float(np.linalg.norm(JT @ f - tau))
 
 
+def informative_joints(x, v, ex: exc.Excavator = exc.Excavator(), v_info: float = 1e-3,
+                       x_stop: float = 2e-3) -> np.ndarray:
+    """Which joints carry information on the tip force: those whose piston slides
+    (speed ``v`` [m/s] above ``v_info``; the observer's slow filter's, which the angle
+    sensor's steps do not shake) off its end stops by ``x_stop`` [m] (the measured
+    position: an arrival's impact reaches the stop before the filters do).  A
+    resting joint's torque is known only to within its static friction, one pressed on
+    a stop not at all (the stop's reaction takes any force towards it): neither gives
+    an equation, only a bound."""
+    x = np.asarray(x, float)
+    return (np.abs(np.asarray(v, float)) > v_info) & (x > x_stop) & (x < ex.strokes - x_stop)
+
+
+def tip_force_determined(q, tau, informative, ex: exc.Excavator = exc.Excavator(), sv_min: float = 0.05,
+                         miss_max: float = 0.1):
+    """The tip force [N] from the informative joints' torques alone, ``nan`` for every
+    world component they do not determine ("cannot tell", instead of a guess).
+
+    The informative rows of ``J^T`` span the directions of force they feel; directions
+    with a singular value below ``sv_min`` [m] (a lever so short that a torque error is
+    amplified more than 1 / sv_min) count as unfelt.  A world component ``k`` is
+    determined when its axis lies within ``miss_max`` (the sine of the angle) of the
+    felt directions: the swing alone feels the lateral force, so with the swing resting
+    or on its stop a force along world x or y is undetermined wherever the upper
+    structure is turned (x = r cos(theta) - t sin(theta)); with fewer than three joints
+    sliding no component may be.  Returns ``(f, known)`` (``known``: bool per axis)."""
+    info = np.asarray(informative, bool)
+    f = np.full(3, np.nan)
+    known = np.zeros(3, bool)
+    if not info.any():
+        return f, known
+    A = exc.tip_jacobian(q, ex).T[info]
+    _, s, vt = np.linalg.svd(A, full_matrices=False)
+    r = int(np.sum(s >= sv_min))
+    if r == 0:
+        return f, known
+    basis = vt[:r]
+    sol = basis.T @ ((basis @ np.linalg.pinv(A) @ np.asarray(tau, float)[info]))
+    miss = np.sqrt(np.clip(1.0 - np.sum(basis ** 2, axis=0), 0.0, None))
+    known = miss <= miss_max
+    f[known] = sol[known]
+    return f, known
+
+
+def _low_pass_known(prev, new, dt: float, tau: float):
+    """The estimate's first-order low-pass, per component, restarted at the new value
+    where the previous one was unknown (nan) and unknown where the new one is."""
+    out = np.full(3, np.nan)
+    for k in range(3):
+        if np.isnan(new[k]):
+            continue
+        out[k] = new[k] if np.isnan(prev[k]) else first_order_step(prev[k], new[k], dt, tau)
+    return out
+
+
 def observer_start(angles, p_a, p_b, ex: exc.Excavator = exc.Excavator()):
     """The observer's state at its first measurement (``angles`` [rad], absolute
     pressures [Pa]): filters at rest there, no force."""
     x = exc.pistons_from_angles(np.asarray(angles, float), ex)
     F = exc.cylinder_forces(p_a, p_b, ex)
-    return {"x": x, "v": np.zeros(4), "F": F, "dF": np.zeros(4), "f": np.zeros(3)}
+    return {"x_slow": x, "v_slow": np.zeros(4), "x": x, "v": np.zeros(4), "F": F, "dF": np.zeros(4), "f": np.zeros(3), "f_known": np.full(3, np.nan),
+            "informative": np.zeros(4, bool)}
 
 
 def observer_step(state: dict, angles, p_a, p_b, dt: float, omega: float, ex: exc.Excavator = exc.Excavator(),
                   payload: float = 0.0, tau_est: float = 0.004, v_rest: float = 2e-3, rest_weight: float = 0.3,
-                  stop_weight: float = 0.02):
+                  stop_weight: float = 0.02, v_info: float = 1e-3, f_info: float = 3.0):
     """One step of the excavator's tip-force observer with the measurements held over
     ``dt`` [s]: joint ``angles`` [rad], absolute pressures [Pa] (4-vectors); ``omega``
     [rad/s] the filters' corner.  Returns ``(state, f_est, residual, tau)``: the new
     state, the tip force [N] after the first-order low-pass ``tau_est`` [s], the
-    least-squares residual [N m] and the joint torques [N m]."""
+    least-squares residual [N m] and the joint torques [N m].
+
+    Beside it, the estimate from the informative joints alone (:func:`informative_joints`,
+    sliding by a slower filter of the angles, corner ``f_info`` [Hz], above ``v_info``
+    [m/s]; their torques by the sliding law in that direction) as
+    ``state["f_known"]``, ``nan`` where they do not determine a component
+    (:func:`tip_force_determined`), and their mask as ``state["informative"]``."""
     xm = exc.pistons_from_angles(np.asarray(angles, float), ex)
     Fm = exc.cylinder_forces(p_a, p_b, ex)
     xs, vs, v_mean, a_mean = [], [], np.empty(4), np.empty(4)
@@ -105,7 +172,23 @@ def observer_step(state: dict, angles, p_a, p_b, dt: float, omega: float, ex: ex
     w = np.where(at_stop, stop_weight, np.where(resting, rest_weight, 1.0))
     f, residual = tip_force_from_torques(q, tau, w, ex)
     f_est = np.array([first_order_step(state["f"][k], f[k], dt, tau_est) for k in range(3)])
-    new = {"x": np.asarray(xs), "v": np.asarray(vs), "F": F_new, "dF": dF_new, "f": f_est}
+    w_info = 2.0 * math.pi * f_info
+    x_slow, v_slow = np.empty(4), np.empty(4)
+    for i in range(4):
+        x_slow[i], v_slow[i], _, _ = motion_filter_step(state["x_slow"][i], state["v_slow"][i], xm[i], dt, w_info)
+    # sliding by both filters the same way: the slow one is not shaken by the sensor's
+    # steps, the fast one stops with the joint (the slow one lags it by 2 / w_info)
+    v_both = np.where(np.sign(v_slow) == np.sign(v_mean), np.sign(v_slow) * np.minimum(np.abs(v_slow), np.abs(v_mean)),
+                      0.0)
+    # off the stops both as measured and as filtered (the filters carry an arrival's
+    # impact for their delay after the measured position reached the stop)
+    info = informative_joints(xm, v_both, ex, v_info) & informative_joints(x_mid, v_both, ex, v_info)
+    tau_i, _, _ = observed_joint_torques(x_mid, v_mean, a_mean, F_mid, ex, payload, v_rest,
+                                         sliding=np.where(info, np.sign(v_slow), 0.0))
+    f_det, _ = tip_force_determined(q, tau_i, info, ex)
+    new = {"x_slow": x_slow, "v_slow": v_slow, "x": np.asarray(xs), "v": np.asarray(vs), "F": F_new, "dF": dF_new, "f": f_est,
+           "f_known": _low_pass_known(state.get("f_known", np.full(3, np.nan)), f_det, dt, tau_est),
+           "informative": info}
     return new, f_est, residual, tau
 
 
@@ -117,9 +200,14 @@ def reflected_force_3d(f_est, f_prev, dt, gain, f_max, rate_max):
 
 
 def estimate_tip_force(data, ex: exc.Excavator = exc.Excavator(), payload: float = 0.0, f_motion: float = 30.0,
-                       tau_est: float = 0.004, v_rest: float = 2e-3, rest_weight: float = 0.3, stop_weight: float = 0.02, P_atm=None):
+                       tau_est: float = 0.004, v_rest: float = 2e-3, rest_weight: float = 0.3, stop_weight: float = 0.02, P_atm=None,
+                       cannot_tell: bool = False, v_info: float = 1e-3):
     """The observer run over an excavator recording (a DataFrame with its columns,
-    pressures gauge): arrays ``f`` (n, 3) [N] and ``residual`` (n,) [N m]."""
+    pressures gauge): arrays ``f`` (n, 3) [N] and ``residual`` (n,) [N m].
+
+    ``cannot_tell``: ``f`` from the sliding joints alone (``state["f_known"]``, see
+    :func:`tip_force_determined`), ``nan`` where they do not determine a component,
+    and a third array, the number of informative joints per sample."""
     P_atm = ex.P_atm if P_atm is None else P_atm
     t = data["t"].to_numpy(float)
     Q = np.column_stack([data[f"angle_{j}"].to_numpy(float) for j in exc.JOINTS])
@@ -129,7 +217,13 @@ def estimate_tip_force(data, ex: exc.Excavator = exc.Excavator(), payload: float
     state = observer_start(Q[0], PA[0], PB[0], ex)
     f = np.zeros((len(t), 3))
     res = np.zeros(len(t))
+    f_known = np.full((len(t), 3), np.nan)
+    n_info = np.zeros(len(t), int)
     for k in range(1, len(t)):
         state, f[k], res[k], _ = observer_step(state, Q[k], PA[k], PB[k], t[k] - t[k - 1], omega, ex, payload,
-                                               tau_est, v_rest, rest_weight, stop_weight)
+                                               tau_est, v_rest, rest_weight, stop_weight, v_info)
+        f_known[k] = state["f_known"]
+        n_info[k] = int(np.sum(state["informative"]))
+    if cannot_tell:
+        return f_known, res, n_info
     return f, res

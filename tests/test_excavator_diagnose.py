@@ -1,0 +1,60 @@
+"""Diagnosis per joint of excavator recordings (``diagnose/excavator.py``), and the tip
+force from the informative joints on the soil contact scenarios."""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from boomfmi import experiments as E
+from boomfmi.diagnose.excavator import diagnose_excavator
+from boomfmi.physics.excavator_force import estimate_tip_force
+from boomfmi.rig.excavator import run_excavator_offline
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "rig"
+SECONDS = 5.5        # the digging cycle up to the bucket's curl: every joint has moved
+
+
+def _record(name):
+    cfg = json.loads((EXAMPLES / f"{name}.json").read_text())
+    return run_excavator_offline(cfg, E.digging_cycle(), SECONDS)
+
+
+@pytest.fixture(scope="module")
+def arm_leak():
+    return diagnose_excavator(_record("excavator_arm_leakage"))
+
+
+def test_arm_leakage_named_with_its_joint(arm_leak):
+    assert "piston_leakage@arm" in arm_leak.verdict
+    arm = arm_leak.joints["arm"]
+    name, params, _, shrink = arm.candidates[0]
+    assert name == "piston_leakage" and shrink > 0.9
+    assert params["A"] == pytest.approx(3e-8, rel=0.1)          # the rig's A_leak
+    for j in ("swing", "boom"):
+        assert not arm_leak.joints[j].flagged
+
+
+@pytest.mark.xfail(strict=True, reason="the bucket's pneumatic cut misses the effect-free rig by 0.027 (summed "
+                                       "NRMSE) against a noise floor of 0.005, cause not found yet (not the "
+                                       "angle sensor's steps nor the start pressures): 'unexplained@bucket'")
+def test_effect_free_recording_gives_no_finding():
+    assert diagnose_excavator(_record("excavator_none")).verdict == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["soft_soil", "hard_soil"])
+def test_tip_force_where_determined_within_10_percent(name):
+    """The informative joints' estimate, where it reports a component (z: boom, arm and
+    bucket sliding; x and y never while the swing is on its stop), within 10 % of the
+    peak (RMSE)."""
+    cmd = E.digging_cycle()
+    d = run_excavator_offline({"machine": "excavator", "contact": E.contact(name).config()}, cmd, cmd.duration)
+    f, _, _ = estimate_tip_force(d, cannot_tell=True)
+    ft = d[["f_tip_x", "f_tip_y", "f_tip_z"]].to_numpy()
+    on = np.linalg.norm(ft, axis=1) > 0.5
+    known = ~np.isnan(f[:, 2])
+    assert (known & on).sum() > 0.04 * on.sum()
+    rmse = np.sqrt(np.mean((f[known, 2] - ft[known, 2]) ** 2))
+    assert rmse < 0.1 * np.max(np.abs(ft[:, 2]))
+    assert np.all(np.isnan(f[on, 0])) and np.all(np.isnan(f[on, 1]))
