@@ -29,13 +29,18 @@ confusion matrix, the share of correct verdicts (overall, per kind, per design a
 per sensor), the false alarms on effect-free cases, and the median holdout shrink of
 detectable single-effect cases; writes docs/diagnosis.md and docs/diagnosis.json.
 
-    python benchmarks/diagnosis_blind.py [--cases 60] [--workers 2] [--only 3 7]
+The diagnoses run through ``boomfmi campaign``'s path (``boomfmi.campaign``: a machine
+per case, on a Dask LocalCluster of ``--workers`` processes, each case's outputs in
+``--cache``/campaign/cases/); the recordings are made before, in as many processes.
+
+    python benchmarks/diagnosis_blind.py [--cases 60] [--workers 2] [--only 3 7] [--resume]
 """
 from __future__ import annotations
 
 import argparse
 import json
 import platform
+import shutil
 import statistics
 import sys
 import time
@@ -49,7 +54,7 @@ sys.path.insert(0, str(ROOT / "src"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import hybrid_rig as hr  # noqa: E402
-from boomfmi.diagnose import diagnose  # noqa: E402
+from boomfmi.campaign import run_campaign, write_manifest  # noqa: E402
 from boomfmi.diagnose.attribute import ABS_FLOOR, NOISE_FACTOR, noise_floor  # noqa: E402
 from boomfmi.experiments import manoeuvres, paper_multistep, random_steps, sine_sweep  # noqa: E402
 from boomfmi.recording import read_recording  # noqa: E402
@@ -215,13 +220,14 @@ def truth_of(case: dict, info: dict, fit_too: bool = True) -> tuple[list, list]:
     return full, out
 
 
-def run_case(args) -> dict:
+def _recordings(args) -> dict:
     case, cache = args
-    info = make_recordings(case, cache)
-    d = cache / f"case{case['case']:03d}_{case['seed']}"
-    t = time.perf_counter()
-    doc = diagnose([d / "fit.csv"], [d / "hold.csv"], d / "out", workers=1)
-    wall = time.perf_counter() - t
+    return make_recordings(case, cache)
+
+
+def score_case(case: dict, info: dict, doc: dict, wall: float) -> dict:
+    """The case's row: what is wrong, its detectable part, the verdict (``doc``: the
+    case's diagnosis.json) and whether it is correct."""
     full, seen = truth_of(case, info)
     _, seen_hold = truth_of(case, info, fit_too=False)
     verdict = sorted(doc["verdict"])
@@ -258,17 +264,34 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", type=Path, default=ROOT / "build" / "blind",
                     help="where the cases' recordings are kept (made once, reused)")
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "diagnosis.md")
+    ap.add_argument("--resume", action="store_true",
+                    help="keep the diagnoses of an earlier run whose recordings are the same (default: diagnose "
+                         "anew, as the benchmark measures the code as it is)")
     args = ap.parse_args(argv)
     cases = [draw_case(i, args.seed) for i in (args.only if args.only is not None else range(args.cases))]
     t0 = time.perf_counter()
+    with ProcessPoolExecutor(args.workers) as pool:        # the independent simulator's recordings
+        infos = list(pool.map(_recordings, [(c, args.cache) for c in cases]))
+    # the diagnoses through boomfmi campaign's path: a machine per case, on a Dask LocalCluster
+    folder = lambda c: args.cache / f"case{c['case']:03d}_{c['seed']}"
+    manifest = write_manifest(args.cache / "campaign_manifest.csv", [
+        {"machine": f"case{c['case']:03d}", "date": "2000-01-01", "role": role, "recording": folder(c) / name}
+        for c in cases for role, name in (("fit", "fit.csv"), ("holdout", "hold.csv"))])
+    campaign = args.cache / "campaign"
+    if not args.resume:
+        shutil.rmtree(campaign, ignore_errors=True)
+    doc = run_campaign(manifest, campaign, workers=args.workers,
+                       progress=lambda text: print(text, end="", file=sys.stderr, flush=True))
     results = []
-    with ProcessPoolExecutor(args.workers) as pool:
-        for r in pool.map(run_case, [(c, args.cache) for c in cases]):
-            results.append(r)
-            print(f"case {r['case']:2d} {r['kind']:11s} {r['fit_design']:>12s} -> {r['hold_design']:12s} {r['sensor']:6s} "
-                  f"truth {label(r['truth']):38s} detectable {label(r['detectable']):38s} "
-                  f"verdict {label(r['verdict']):38s} {'ok' if r['correct'] else 'WRONG'} ({r['wall']:.0f} s)",
-                  flush=True)
+    for c, info, row in zip(cases, infos, doc["cases"]):
+        if row["status"] != "done":
+            raise RuntimeError(f"case {c['case']}: the diagnosis failed: {row['error']}")
+        r = score_case(c, info, json.loads((campaign / row["folder"] / "diagnosis.json").read_text()), row["wall_s"])
+        results.append(r)
+        print(f"case {r['case']:2d} {r['kind']:11s} {r['fit_design']:>12s} -> {r['hold_design']:12s} {r['sensor']:6s} "
+              f"truth {label(r['truth']):38s} detectable {label(r['detectable']):38s} "
+              f"verdict {label(r['verdict']):38s} {'ok' if r['correct'] else 'WRONG'} ({r['wall']:.0f} s)",
+              flush=True)
     labels = sorted({label(r["detectable"]) for r in results} | {label(r["verdict"]) for r in results})
     matrix = {t: {v: 0 for v in labels} for t in labels}
     for r in results:

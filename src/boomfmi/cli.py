@@ -5,8 +5,11 @@
                          [--algorithm gauss-seidel|jacobi] --out result.csv
     boomfmi rig serve --port P [--lockstep] [--record FILE] [--config rig.json] [--key-file K]
     boomfmi record --experiment paper_multistep --rig udp://127.0.0.1:P --out run.csv [--key-file K]
+                                        (an excavator experiment, e.g. digging_cycle, through excavator_bridge.fmu)
     boomfmi identify RUN.csv [RUN.csv ...] [--method paper|fit] [--a-max] [--holdout H.csv] --out params.json
     boomfmi diagnose FIT.csv [FIT.csv ...] --holdout HOLD.csv [HOLD.csv ...] --out DIR
+    boomfmi campaign MANIFEST.csv --out DIR [--scheduler ADDRESS] [--workers N]
+    boomfmi fleet --machines 8 --weeks 6 --out DIR   a virtual fleet's recordings and manifest
     boomfmi describe FMU [FMU ...]      the FMUs' interfaces as Markdown tables
     boomfmi recording import FILE --map "t=1:ms,u=2:V,..." [--delimiter D] [--skip-rows N] --out run.csv
     boomfmi bench friction FIT... (--holdout HOLD... | --split-strokes) --area A --out DIR [map options]
@@ -128,6 +131,11 @@ def _simulate(args) -> int:
     with OutputSet(args.out.parent) as files:          # an interrupt leaves the old file whole
         result.to_csv(files.path(args.out.name), index=False, float_format="%.10g")
     last = result.iloc[-1]
+    if "x" not in result:                              # the whole excavator's columns
+        from .physics import JOINTS
+        print(f"wrote {args.out}: {len(result)} rows, t = {result.t.iloc[0]:g} to {last.t:g} s; at the end "
+              + ", ".join(f"x_{j} = {1000 * last[f'x_{j}']:.2f} mm" for j in JOINTS))
+        return 0
     print(f"wrote {args.out}: {len(result)} rows, t = {result.t.iloc[0]:g} to {last.t:g} s; "
           f"at the end x = {1000 * last.x:.2f} mm, p_a = {last.p_a / 1e5:.3f} bar, "
           f"p_b = {last.p_b / 1e5:.3f} bar (gauge)")
@@ -169,10 +177,10 @@ def _view(args) -> int:
 
 def _rig_serve(args) -> int:
     from .link.protocol import load_key
-    from .rig import VirtualRig, load_config
+    from .rig import make_rig
     from .rig.server import realtime_priority, serve
     key = load_key(args.key_file)
-    plant = VirtualRig(load_config(args.config))
+    plant = make_rig(args.config)       # the boom's, or the excavator's ("machine": "excavator")
     if args.priority:
         print(realtime_priority(args.priority), flush=True)
     mode = "lockstep" if args.lockstep else "real time, 1 kHz"
@@ -234,6 +242,31 @@ def _diagnose(args) -> int:
         elif "skipped" in c or "error" in c:
             print(f"not confirmed through the FMUs: {c.get('skipped') or c.get('error')}")
     print(f"wrote {args.out}/diagnosis.json and {args.out}/report.html")
+    return 0
+
+
+def _campaign(args) -> int:
+    from .campaign import run_campaign
+    doc = run_campaign(args.manifest, args.out, scheduler=args.scheduler, workers=args.workers, ssp=args.ssp,
+                       progress=lambda text: print(text, end="", file=sys.stderr, flush=True))
+    run = doc["run"]
+    for m, info in doc["machines"].items():
+        last = info["last"]
+        verdict = (f"FAILED ({last['error']})" if last["status"] != "done" else
+                   f"verdict {last['verdict']}" if last["judgeable"] else "not judgeable")
+        flags = "; ".join(f"{f['name']} {f['direction']} from {f['date']}" for f in info["flags"]) or "no flag"
+        print(f"{m}: last {last['date']} {verdict}; {flags}")
+    print(f"{run['cases']} cases: {run['ran']} run, {run['resumed']} done before, {run['failed']} failed "
+          f"({run['wall_s']:.0f} s on {run['worker_threads']} worker thread(s) at {run['address']})")
+    print(f"wrote {args.out}/campaign.json, {args.out}/campaign.html and {args.out}/cases/")
+    return 1 if run["failed"] else 0
+
+
+def _fleet(args) -> int:
+    from .campaign.fleet import make_fleet
+    manifest = make_fleet(args.out, args.machines, args.weeks, args.seed, args.duration, args.workers,
+                          progress=_progress("fleet"))
+    print(f"wrote {manifest} ({args.machines} machines x {args.weeks} weeks) and {args.out}/truth.json")
     return 0
 
 
@@ -370,7 +403,9 @@ def main(argv=None) -> int:
     p.add_argument("--rig", required=True, help="udp://HOST:PORT")
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--key-file", help="file holding the shared link key (default: $BOOMFMI_LINK_KEY)")
-    p.add_argument("--fmu", type=Path, default=Path("build/fmus/hardware_bridge.fmu"))
+    p.add_argument("--fmu", type=Path, default=None,
+                   help="the bridge FMU (default: build/fmus/hardware_bridge.fmu; for an excavator experiment "
+                        "such as digging_cycle, build/fmus/excavator_bridge.fmu)")
     p.add_argument("--step", type=float, default=1e-3)
     p.add_argument("--stop", type=float, default=None)
     p.add_argument("--timeout", type=float, default=0.05, help="longest wait for the rig's answer per step [s]")
@@ -397,10 +432,32 @@ def main(argv=None) -> int:
     p.add_argument("--ssp", type=Path, default=None,
                    help="the boom's SSP for confirming the verdict through the FMUs (default: build/excavator_boom.ssp)")
     p.set_defaults(run=_diagnose)
-    p = sub.add_parser("view", help="the virtual boom in a browser, from a run file or live; or a video of it")
+    p = sub.add_parser("campaign", help="identify and diagnose many machines and dates on Dask; trends and flags")
+    p.add_argument("manifest", type=Path, help="CSV: machine, date, role (fit or holdout), recording[, sidecar]")
+    p.add_argument("--out", type=Path, required=True,
+                   help="output folder: campaign.json, campaign.html, cases/<machine>/<date>/ (a re-run resumes)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a local cluster)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="worker processes of the local cluster, one thread each (default: one per core)")
+    p.add_argument("--ssp", type=Path, default=None,
+                   help="the boom's SSP for each verdict's confirmation through the FMUs "
+                        "(default: build/excavator_boom.ssp)")
+    p.set_defaults(run=_campaign)
+    p = sub.add_parser("fleet", help="a virtual fleet (the virtual rig, known changes) for campaign's demo")
+    p.add_argument("--machines", type=int, default=8)
+    p.add_argument("--weeks", type=int, default=6)
+    p.add_argument("--seed", type=int, default=20)
+    p.add_argument("--duration", type=_positive, default=7.0, help="each experiment's length [s] (default 7)")
+    p.add_argument("--workers", type=int, default=None, help="processes recording (default: one per core)")
+    p.add_argument("--out", type=Path, required=True, help="folder: recordings, manifest.csv, truth.json")
+    p.set_defaults(run=_fleet)
+    p = sub.add_parser("view", help="the virtual boom or whole excavator in a browser, from a run file or live; "
+                                    "or a video of the boom")
     source = p.add_mutually_exclusive_group(required=True)
     source.add_argument("--replay", type=Path, metavar="RUN.csv",
-                        help="a recording, or a teleoperation run from `boomfmi simulate` (model beside machine)")
+                        help="a recording, the boom's or the excavator's (its kind read from its columns), or "
+                             "a teleoperation run from `boomfmi simulate` (model beside machine)")
     source.add_argument("--live", metavar="udp://HOST:PORT",
                         help="listen there for a co-simulation's samples (`boomfmi simulate --view`, "
                              "signed with the same link key)")

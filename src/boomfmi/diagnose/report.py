@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import html
 import json
+import multiprocessing
 from pathlib import Path
 
 import numpy as np
@@ -76,9 +77,10 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
         best = att.candidates[0]
         verdict_fx = best.params if "+" in best.name else {best.name: best.params}
         verdict_values = best.values or values      # a friction effect's own load
-    # the FMUs confirm the result in another process while the report is drawn here
-    pool = ProcessPoolExecutor(1)
-    confirming = pool.submit(confirm, values, verdict_fx, hold, ssp, verdict_values)
+    # the FMUs confirm the result in another process while the report is drawn here (in
+    # this one where it may start none: a daemon process, such as a Dask nanny's worker)
+    pool = None if multiprocessing.current_process().daemon else ProcessPoolExecutor(1)
+    confirming = pool.submit(confirm, values, verdict_fx, hold, ssp, verdict_values) if pool else None
     rig = rig_model(hold)            # the holdout's rig, from its sidecar, for all that follows
     prep = prepare(hold, geometry=rig.geometry, P_atm=rig.P_atm)
     base_sim = simulate_recording(values, hold, rig=rig)
@@ -104,11 +106,13 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
            "verdict": att.verdict}
     after_sim = simulate_recording(verdict_values, hold, effects=verdict_fx, rig=rig) if verdict_fx else None
     try:
-        doc["confirmation"] = confirming.result()
+        doc["confirmation"] = (confirming.result() if pool else
+                               confirm(values, verdict_fx, hold, ssp, verdict_values))
     except Exception as e:            # a failing confirmation is reported, not fatal
         doc["confirmation"] = {"error": f"{type(e).__name__}: {e}"}
     finally:
-        pool.shutdown()
+        if pool:
+            pool.shutdown()
     if after_sim is not None and "shrink" in doc["confirmation"]:
         doc["confirmation"] = agreement(doc["confirmation"], shrink(nrmse(base_sim, hold), nrmse(after_sim, hold)))
     _write(out, doc, hold, base_sim, after_sim, loc)

@@ -1,0 +1,266 @@
+"""Running a campaign's cases on Dask (``dask.distributed``).
+
+* **Where.**  A :class:`distributed.LocalCluster` by default: one worker process per
+  core (``workers``), one thread each (a case is single-threaded NumPy and SciPy; the
+  nanny also sets ``OMP_NUM_THREADS=1``), no dashboard, and without Dask's default
+  ``MALLOC_TRIM_THRESHOLD_`` (which slows a case down by a fifth or more).  Or any running scheduler by
+  its address (``scheduler="tcp://host:8786"``), whose workers need boomfmi installed
+  and nothing else: each case's recordings travel with it as bytes
+  (:func:`~.case.case_spec`), and its outputs come back the same way.
+* **Resume.**  Each case's result is written as it completes, into
+  ``OUT/cases/<machine>/<date>/``: the files ``boomfmi identify`` and ``boomfmi
+  diagnose`` write, then ``case.json`` (moved into place last, so a folder without it
+  is no result).  A re-run skips each case whose ``case.json`` says done for the very
+  same input (the fingerprint of its recordings' and sidecars' bytes and roles); a
+  failed case, or one whose recordings changed, is run again.
+* **Failures.**  A case that raises is reported with its error and traceback in its
+  ``case.json`` and in ``campaign.json``; the rest go on.  A worker lost in mid-case
+  (killed, out of memory, its machine gone) is the scheduler's to handle: the case is
+  started again on another worker, up to ``distributed.scheduler.allowed-failures``
+  times (default 3), after which it is reported failed (``KilledWorker``).  Results
+  reach the client once per case, and only the client writes: a case is never
+  written twice, nor half.
+* **Progress.**  ``progress`` is told of every case as it completes
+  (:class:`Progress`); the CLI draws a bar from it.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import os
+import sys
+import time
+from collections import deque
+from datetime import datetime, timezone
+from pathlib import Path
+
+from .._json import plain
+from ..outputs import OutputSet
+from .case import CASE_VERSION, case_spec, run_case
+from .manifest import Manifest, read_manifest, slug
+
+#: seconds to wait for a scheduler's first worker
+WORKER_WAIT = 60.0
+
+
+class Progress:
+    """The campaign's progress: counts, elapsed time, an estimate of what is left, and a
+    text bar.  ``write(text)`` receives the bar (and a line per finished case)."""
+
+    def __init__(self, total: int, skipped: int, write=None, tty: bool | None = None):
+        self.total, self.skipped, self.done, self.failed = total, skipped, 0, 0
+        self.t0 = time.perf_counter()
+        self.write = write
+        self.tty = sys.stderr.isatty() if tty is None else tty
+
+    def bar(self) -> str:
+        n = self.skipped + self.done + self.failed
+        width = 30
+        fill = int(round(width * n / self.total)) if self.total else width
+        elapsed = time.perf_counter() - self.t0
+        ran = self.done + self.failed
+        left = self.total - n
+        eta = f", about {_duration(elapsed / ran * left)} left" if ran and left else ""
+        extra = ", ".join(s for s in (f"{self.skipped} done before" if self.skipped else "",
+                                      f"{self.failed} failed" if self.failed else "") if s)
+        return (f"[{'#' * fill}{'.' * (width - fill)}] {n}/{self.total} cases"
+                + (f" ({extra})" if extra else "") + f", {_duration(elapsed)}{eta}")
+
+    def case(self, line: str, failed: bool) -> None:
+        if failed:
+            self.failed += 1
+        else:
+            self.done += 1
+        if self.write:
+            if self.tty:
+                self.write("\r\033[K" + line + "\n" + self.bar())
+            else:
+                self.write(line + "\n" + self.bar() + "\n")
+
+    def start(self) -> None:
+        if self.write:
+            self.write(self.bar() + ("" if self.tty else "\n"))
+
+    def finish(self) -> None:
+        if self.write and self.tty:
+            self.write("\n")
+
+
+def _duration(s: float) -> str:
+    s = int(round(s))
+    return f"{s // 3600}h{s % 3600 // 60:02d}m" if s >= 3600 else f"{s // 60}m{s % 60:02d}s" if s >= 60 else f"{s}s"
+
+
+def case_folder(out: Path, case) -> Path:
+    return Path(out) / "cases" / case.folder
+
+
+def load_done(folder: Path, fingerprint: str) -> dict | None:
+    """The case record in ``folder`` where it is done for this input; else None."""
+    try:
+        rec = json.loads((folder / "case.json").read_text())
+    except (OSError, ValueError):
+        return None
+    if rec.get("status") == "done" and rec.get("fingerprint") == fingerprint:
+        return rec
+    return None
+
+
+def write_case(folder: Path, case, result: dict) -> dict:
+    """Write a case's outputs and its ``case.json`` (last) into ``folder``, as one set
+    (files an earlier run of the case left and this one did not write are removed);
+    return the record."""
+    record = {"machine": case.machine, "date": case.date, "status": result["status"],
+              "fingerprint": result.get("fingerprint"), "case_version": CASE_VERSION,
+              "recordings": {role: [str(e.recording) for e in case.role(role)] for role in ("fit", "holdout")},
+              "worker": result.get("worker"), "wall_s": result.get("wall_s"),
+              "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+              "error": result.get("error"), "summary": result.get("summary"),
+              "files": sorted(result.get("outputs", {})), "log": result.get("log", []),
+              "traceback": result.get("traceback")}
+    old = [p.name for p in folder.iterdir() if p.is_file() and not p.name.startswith(".")] if folder.is_dir() else []
+    with OutputSet(folder, stale=old) as files:
+        for name, data in result.get("outputs", {}).items():
+            files.path(name).write_bytes(data)
+        files.path("case.json").write_text(json.dumps(plain(record), indent=1))
+    return record
+
+
+def _failure(case, fingerprint: str, error: str) -> dict:
+    return {"status": "failed", "error": error, "fingerprint": fingerprint, "outputs": {}, "summary": None,
+            "log": [], "worker": None, "wall_s": None, "traceback": None}
+
+
+class Engine:
+    """A Dask client for a campaign: the given ``client``, a scheduler's by
+    ``scheduler`` address, or a LocalCluster of ``workers`` processes (default: one per
+    core).  A context manager; closes only what it started."""
+
+    def __init__(self, scheduler: str | None = None, workers: int | None = None, client=None):
+        self.client, self.cluster, self._own = client, None, client is None
+        self.scheduler, self.workers = scheduler, workers
+        if scheduler and workers:
+            raise ValueError("--workers sizes the local cluster; a scheduler given by --scheduler has its own workers")
+        if workers is not None and workers < 1:
+            raise ValueError(f"--workers {workers}: give 1 or more")
+
+    def __enter__(self):
+        import dask
+        from distributed import Client, LocalCluster
+        if self.client is not None:
+            return self
+        if self.scheduler:
+            try:
+                self.client = Client(self.scheduler, timeout="20s")
+            except OSError as e:
+                raise OSError(f"cannot reach the Dask scheduler at {self.scheduler}: {e}") from None
+            try:
+                self.client.wait_for_workers(1, timeout=WORKER_WAIT)
+            except Exception:
+                self.client.close()
+                raise RuntimeError(f"the Dask scheduler at {self.scheduler} has no worker "
+                                   f"(none joined within {WORKER_WAIT:g} s)") from None
+        else:
+            n = self.workers or os.cpu_count() or 1
+            # glibc's trim threshold that Dask sets for its workers by default (64 KiB) makes
+            # a case's many short-lived NumPy arrays go back to the system and come again:
+            # a case took 20 to 40 % longer with it (docs/campaign-scaling.md)
+            with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+                self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                            dashboard_address=None, silence_logs=logging.ERROR)
+            self.client = Client(self.cluster)
+        return self
+
+    def __exit__(self, *exc):
+        if self._own:
+            if self.client is not None:
+                self.client.close()
+            if self.cluster is not None:
+                self.cluster.close()
+
+    @property
+    def address(self) -> str:
+        return self.client.scheduler.address
+
+    def slots(self) -> int:
+        return max(1, sum(self.client.nthreads().values()))
+
+
+def run_cases(manifest: Manifest, out, engine: Engine, ssp=None, progress=None) -> list[dict]:
+    """Every case of ``manifest`` on ``engine``: the records of those done before (same
+    input) as they are, the others run, each written as it completes.  Returns the
+    records in the manifest's order."""
+    from distributed import as_completed
+    out = Path(out)
+    records: dict[tuple, dict] = {}
+    todo = deque()
+    for case in manifest.cases:
+        fp = case_spec(case, ssp)["fingerprint"]
+        done = load_done(case_folder(out, case), fp)
+        if done is not None:
+            records[case.key] = dict(done, resumed=True)
+        else:
+            todo.append((case, fp))
+    bar = Progress(len(manifest.cases), len(records), progress)
+    bar.start()
+    running: dict = {}
+    pending = as_completed()
+
+    def submit():
+        while todo and len(running) < 2 * engine.slots() + 1:
+            case, fp = todo.popleft()
+            spec = case_spec(case, ssp)
+            key = f"boomfmi-case-{slug(case.machine)}-{slug(case.date)}-{spec['fingerprint'][:12]}"
+            fut = engine.client.submit(run_case, spec, key=key, pure=False)
+            running[fut.key] = (case, spec["fingerprint"])
+            pending.add(fut)
+    try:
+        submit()
+        for fut in pending:
+            case, fp = running.pop(fut.key)
+            try:
+                result = fut.result()
+            except Exception as e:       # the case's worker lost too often, the scheduler gone, ...
+                name = type(e).__name__
+                hint = (" (the case's worker died each time it ran it: distributed.scheduler.allowed-failures)"
+                        if name == "KilledWorker" else "")
+                result = _failure(case, fp, f"{name}: {e}{hint}")
+            fut.release()
+            rec = write_case(case_folder(out, case), case, result)
+            records[case.key] = rec
+            failed = rec["status"] != "done"
+            what = (f"FAILED: {rec['error']}" if failed else
+                    f"verdict {rec['summary'].get('verdict')}" if rec["summary"].get("judgeable") else
+                    f"not judgeable: {rec['summary'].get('reason')}")
+            bar.case(f"{case.label}: {what} ({rec['wall_s'] or 0:.0f} s on {rec['worker'] or '-'})", failed)
+            submit()
+    except BaseException:
+        for f in list(pending.futures):
+            f.cancel()
+        raise
+    finally:
+        bar.finish()
+    return [records[c.key] for c in manifest.cases]
+
+
+def run_campaign(manifest, out, scheduler: str | None = None, workers: int | None = None, ssp=None,
+                 progress=None, client=None) -> dict:
+    """``boomfmi campaign``: check the manifest (a :class:`~.manifest.ManifestError`
+    before any work), run its cases on Dask (see the module), then write
+    ``campaign.json``, ``campaign.html`` and the trend plots into ``out``.  Returns the
+    campaign document.  ``progress(text)`` gets the progress bar's text."""
+    manifest = manifest if isinstance(manifest, Manifest) else read_manifest(manifest)
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"{out}: not a folder; --out names the campaign's output folder")
+    from .report import write_campaign
+    t0 = time.perf_counter()
+    with Engine(scheduler, workers, client) as engine:
+        address = engine.address
+        slots = engine.slots()
+        records = run_cases(manifest, out, engine, ssp=ssp, progress=progress)
+    run = {"manifest": str(Path(manifest.path).resolve()), "scheduler": scheduler or "local",
+           "address": address, "worker_threads": slots, "cases": len(records),
+           "ran": sum(not r.get("resumed") for r in records), "resumed": sum(bool(r.get("resumed")) for r in records),
+           "failed": sum(r["status"] != "done" for r in records), "wall_s": round(time.perf_counter() - t0, 2)}
+    return write_campaign(out, manifest, records, run)
