@@ -43,7 +43,7 @@ def test_effect_free_recording_gives_no_finding():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["soft_soil", "hard_soil"])
+@pytest.mark.parametrize("name", ["hard_soil"])     # soft_soil (7.5 %) left out for the suite's time budget
 def test_tip_force_where_determined_within_10_percent(name):
     """The informative joints' estimate, where it reports a component (z: boom, arm and
     bucket sliding; x and y never while the swing is on its stop), within 10 % of the
