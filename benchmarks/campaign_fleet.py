@@ -2,8 +2,8 @@
 """A virtual fleet through ``boomfmi campaign``: are the injected changes flagged in time?
 
 Makes the virtual fleet (``boomfmi.campaign.fleet``: N machines of the virtual rig
-recorded every week for W weeks; some do not change, the others start to leak, lose
-their friction's level or get a sluggish valve at a known week), runs the campaign on
+recorded every week for W weeks; some do not change, the others start to leak, see
+their friction rise or get a sluggish valve at a known week), runs the campaign on
 a Dask LocalCluster (every machine and week identified and diagnosed, trends and
 flags across weeks), and scores the flags against the truth: every onset flagged
 within one week of its date and named as what it is, no flag on a machine that did
@@ -64,7 +64,7 @@ def main(argv=None) -> int:
              "own load (each parameter within +-8 % of the reference rig) and noise, recorded every week (a fit",
              f"and a holdout experiment of random steps, {truth['duration_s']:g} s each, new commands every week).",
              "Machines that change start to leak (an orifice of 6e-9 m2 across the piston, growing 1.6 times a",
-             "week), lose their friction's level (F_s and F_d up 7 % a week), or get a sluggish valve (an",
+             "week), see their friction rise (F_s and F_d up 7 % a week), or get a sluggish valve (an",
              "overdamped spool, zeta 1.5, at 40 Hz falling 1.25 times a week), from an onset week drawn between",
              "the second week and the last.", "",
              "The campaign flags a parameter whose 95 % interval leaves the reference date's, an effect the",

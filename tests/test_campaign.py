@@ -253,6 +253,21 @@ def test_a_local_campaign_reports_a_failing_case_and_resumes(tmp_path, recording
     assert ran == {("m1", "2025-01-13"), ("m2", "2025-01-06")}
 
 
+def _worker_settings():
+    import dask
+    return dask.config.get("distributed.worker.profile.enabled"), os.environ.get("MALLOC_TRIM_THRESHOLD_")
+
+
+def test_the_local_clusters_workers_run_without_the_profiler_and_the_trim_threshold():
+    """Both slowed a case down (docs/campaign-scaling.md); a one-thread worker per process."""
+    from boomfmi.campaign import Engine
+    with Engine(workers=2) as engine:
+        assert engine.slots() == 2 and len(engine.client.nthreads()) == 2
+        assert set(engine.client.run(_worker_settings).values()) == {(False, None)}
+    with pytest.raises(ValueError, match="--workers sizes the local cluster"):
+        Engine(scheduler="tcp://127.0.0.1:1", workers=2)
+
+
 def _wait_for(predicate, timeout, what):
     t = time.monotonic()
     while time.monotonic() - t < timeout:
@@ -271,7 +286,8 @@ def test_a_campaign_on_a_scheduler_survives_a_worker_killed_mid_case(tmp_path, r
     from distributed import Client
     machines, dates = ["m1", "m2", "m3"], ["2025-01-06", "2025-01-13"]
     manifest = _campaign(tmp_path, recordings, machines, dates)
-    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
+               DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED="False")      # (LOCAL_WORKER_CONFIG)
     procs = []
     try:
         sched_file = tmp_path / "scheduler.json"

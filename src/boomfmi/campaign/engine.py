@@ -2,8 +2,8 @@
 
 * **Where.**  A :class:`distributed.LocalCluster` by default: one worker process per
   core (``workers``), one thread each (a case is single-threaded NumPy and SciPy; the
-  nanny also sets ``OMP_NUM_THREADS=1``), no dashboard, and without Dask's default
-  ``MALLOC_TRIM_THRESHOLD_`` (which slows a case down by a fifth or more).  Or any running scheduler by
+  nanny also sets ``OMP_NUM_THREADS=1``), no dashboard, and neither Dask's profiler
+  nor its ``MALLOC_TRIM_THRESHOLD_``, which slow a case down (:data:`LOCAL_WORKER_CONFIG`).  Or any running scheduler by
   its address (``scheduler="tcp://host:8786"``), whose workers need boomfmi installed
   and nothing else: each case's recordings travel with it as bytes
   (:func:`~.case.case_spec`), and its outputs come back the same way.
@@ -41,6 +41,15 @@ from .manifest import Manifest, read_manifest, slug
 
 #: seconds to wait for a scheduler's first worker
 WORKER_WAIT = 60.0
+#: Dask settings of the local cluster's workers.  A case is many small NumPy and SciPy
+#: calls; two of Dask's defaults slow that down: its statistical profiler (a sample of
+#: the running task's stack every 10 ms: a loop of small NumPy calls ran 1.6 times as
+#: long in a worker with it as without it, or in a plain process), and glibc's trim
+#: threshold that its nannies set (64 KiB: short-lived arrays go back to the system and
+#: come again; a case 10 % slower or more).  Off for the local cluster;
+#: docs/campaign-scaling.md.
+LOCAL_WORKER_CONFIG = {"distributed.worker.profile.enabled": False,
+                       "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
 
 
 class Progress:
@@ -126,7 +135,7 @@ def write_case(folder: Path, case, result: dict) -> dict:
     return record
 
 
-def _failure(case, fingerprint: str, error: str) -> dict:
+def _failure(fingerprint: str, error: str) -> dict:
     return {"status": "failed", "error": error, "fingerprint": fingerprint, "outputs": {}, "summary": None,
             "log": [], "worker": None, "wall_s": None, "traceback": None}
 
@@ -162,10 +171,7 @@ class Engine:
                                    f"(none joined within {WORKER_WAIT:g} s)") from None
         else:
             n = self.workers or os.cpu_count() or 1
-            # glibc's trim threshold that Dask sets for its workers by default (64 KiB) makes
-            # a case's many short-lived NumPy arrays go back to the system and come again:
-            # a case took 20 to 40 % longer with it (docs/campaign-scaling.md)
-            with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+            with dask.config.set(LOCAL_WORKER_CONFIG):
                 self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                             dashboard_address=None, silence_logs=logging.ERROR)
             self.client = Client(self.cluster)
@@ -224,7 +230,7 @@ def run_cases(manifest: Manifest, out, engine: Engine, ssp=None, progress=None) 
                 name = type(e).__name__
                 hint = (" (the case's worker died each time it ran it: distributed.scheduler.allowed-failures)"
                         if name == "KilledWorker" else "")
-                result = _failure(case, fp, f"{name}: {e}{hint}")
+                result = _failure(fp, f"{name}: {e}{hint}")
             fut.release()
             rec = write_case(case_folder(out, case), case, result)
             records[case.key] = rec
