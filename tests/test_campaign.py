@@ -97,7 +97,6 @@ def test_every_fault_is_listed_and_the_cli_starts_no_work(tmp_path):
     _files(tmp_path, "a1.csv")
     path = _manifest(tmp_path, "machine,date,role,recording\nA,2025-01-06,fit,a1.csv\n"
                                "A,2025-01-06,test,gone.csv\nB,2025-13-01,fit,a1.csv\n")
-    t = time.perf_counter()
     proc = cli("campaign", path, "--out", tmp_path / "out", cwd=tmp_path)
     assert proc.returncode == 1 and "Traceback" not in proc.stderr
     for text in ("line 3, column role: 'test'", "line 3, column recording: gone.csv: no such file",
@@ -105,7 +104,6 @@ def test_every_fault_is_listed_and_the_cli_starts_no_work(tmp_path):
                  "nothing was run"):
         assert text in proc.stderr, (text, proc.stderr)
     assert not (tmp_path / "out").exists()          # refused before any work: no folder, no cluster
-    assert time.perf_counter() - t < 20
 
 
 # --- trends and flags ---------------------------------------------------------------------
@@ -240,11 +238,9 @@ def test_a_local_campaign_reports_a_failing_case_and_resumes(tmp_path, recording
     assert doc["machines"]["m1"]["flags"] == [] and doc["machines"]["m2"]["last"]["verdict"] == []
     # a re-run skips what is done and runs the failed case again (still failing)
     done_before = (out / "cases/m1/2025-01-06/case.json").stat().st_mtime_ns
-    t = time.perf_counter()
     again = run_campaign(manifest, out, workers=1, ssp=tmp_path / "no.ssp")
     assert again["run"]["resumed"] == 3 and again["run"]["ran"] == 1 and again["run"]["failed"] == 1
     assert (out / "cases/m1/2025-01-06/case.json").stat().st_mtime_ns == done_before
-    assert time.perf_counter() - t < 60
     # a recording that changed is the same case with another input: run again
     shutil.copy(recordings / "hold.csv", tmp_path / "m1" / "2025-01-13_fit.csv")
     shutil.copy(recordings / "fit.csv", tmp_path / "m1" / "2025-01-13_holdout.csv")
