@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-FMU_NAMES = ("valve", "cylinder", "boom_load", "force_estimator", "hardware_bridge")
+FMU_NAMES = ("valve", "cylinder", "boom_load", "force_estimator", "hardware_bridge",
+             "excavator_force_estimator")
 
 
 def _sources_newer_than(fmu: Path) -> bool:

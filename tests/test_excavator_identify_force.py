@@ -3,6 +3,7 @@ excavator virtual rig's recordings (effect-free, realistic sensors)."""
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from boomfmi import experiments as E
@@ -26,7 +27,7 @@ def _err(result, truth, name):
 
 
 @pytest.mark.parametrize("name", ["K_v_swing", "F_d_swing", "K_v_boom", "F_d_boom", "K_v_arm", "F_d_arm",
-                                  "F_s_arm", "payload"])
+                                  "F_s_arm", "K_v_bucket", "F_s_bucket", "payload"])
 def test_identified_within_5_percent(identified, name):
     result, truth = identified
     assert _err(result, truth, name) < 0.05, (name, result.params[name], truth[name])
@@ -34,10 +35,11 @@ def test_identified_within_5_percent(identified, name):
     assert lo < result.params[name].value < hi
 
 
-@pytest.mark.xfail(strict=True, reason="the bucket moves ~6 % of the time, in fast runs to its stops: K_v and F_d "
-                                       "are confounded (measured +18 % / -48 %); F_s of swing, boom and bucket "
-                                       "from the starts within 10 to 24 % only")
-@pytest.mark.parametrize("name", ["K_v_bucket", "F_d_bucket", "F_s_swing", "F_s_boom", "F_s_bucket"])
+@pytest.mark.xfail(strict=True, reason="measured F_d_bucket -5.2 % (the equation error puts it 4 to 5 % low on "
+                                       "every excitation seed tried, interval excluding the truth: a bias, cause "
+                                       "not found); F_s_swing -16 % and F_s_boom +15 % from the starts (-21 to "
+                                       "+45 % with ideal sensors too: not the sensors)")
+@pytest.mark.parametrize("name", ["F_d_bucket", "F_s_swing", "F_s_boom"])
 def test_identified_within_5_percent_not_yet(identified, name):
     result, truth = identified
     assert _err(result, truth, name) < 0.05
@@ -75,6 +77,26 @@ def test_tip_force_cannot_tell_where_joints_carry_no_information(push):
     assert np.all(np.isnan(f[n_info == 0]))
 
 
+def _observer(d):
+    """estimate_tip_force's loop (its defaults), run once for both its answers: the
+    least-squares estimate, and per sample the informative joints' estimate (nan where
+    undetermined), their number and the determined components (``state["determined"]``)."""
+    from boomfmi.physics.excavator import JOINTS, Excavator
+    from boomfmi.physics.excavator_force import observer_start, observer_step
+    P = Excavator().P_atm
+    Q = d[[f"angle_{j}" for j in JOINTS]].to_numpy()
+    PA = d[[f"p_a_{j}" for j in JOINTS]].to_numpy() + P
+    PB = d[[f"p_b_{j}" for j in JOINTS]].to_numpy() + P
+    t = d["t"].to_numpy()
+    f, f_known = np.zeros((len(t), 3)), np.full((len(t), 3), np.nan)
+    n_info, det = np.zeros(len(t), int), np.zeros((len(t), 3), bool)
+    state = observer_start(Q[0], PA[0], PB[0])
+    for k in range(1, len(t)):
+        state, f[k], _, _ = observer_step(state, Q[k], PA[k], PB[k], t[k] - t[k - 1], 2.0 * math.pi * 30.0)
+        f_known[k], n_info[k], det[k] = state["f_known"], np.sum(state["informative"]), state["determined"]
+    return f, f_known, n_info, det
+
+
 def test_fmu_matches_physics_and_validates(push):
     fmpy = pytest.importorskip("fmpy")
     from pathlib import Path
@@ -91,13 +113,22 @@ def test_fmu_matches_physics_and_validates(push):
         inputs[n] = d[n].to_numpy()
     res = fmpy.simulate_fmu(str(fmu), start_time=0.0, stop_time=float(d["t"].iloc[-1]), step_size=1e-3,
                             output_interval=1e-3, input=inputs,
-                            output=["f_est_x", "f_est_y", "f_est_z", "f_reflect_z", "residual"])
-    f, _ = estimate_tip_force(d)
+                            output=["f_est_x", "f_est_y", "f_est_z", "f_reflect_z", "residual", "n_informative",
+                                    "determined_x", "determined_y", "determined_z", "f_det_x", "f_det_y", "f_det_z"])
+    f, f_known, n_info, det = _observer(d)
     # the FMU's output at t_k holds the step that took the sample at t_(k-1): one step behind
     n = min(len(res), len(f)) - 1
     for k, c in enumerate("xyz"):
         assert np.allclose(res[f"f_est_{c}"][1:n + 1], f[:n, k], atol=1e-6, rtol=1e-6) or \
             np.allclose(res[f"f_est_{c}"][:n], f[:n, k], atol=1e-6, rtol=1e-6)
+    # cannot tell: the physics' informative joints and determined components, step for step
+    np.testing.assert_array_equal(res["n_informative"][1:n + 1], n_info[:n])
+    assert np.array_equal(det, ~np.isnan(f_known))
+    assert det[:, 1].sum() > 100 and not det[:, 0].any()    # the swing alone sliding: y only
+    for k, c in enumerate("xyz"):
+        np.testing.assert_array_equal(res[f"determined_{c}"][1:n + 1], det[:n, k], err_msg=c)
+        held = pd.Series(f_known[:n, k]).ffill().fillna(0.0).to_numpy()    # the last determined value
+        np.testing.assert_allclose(res[f"f_det_{c}"][1:n + 1], held, atol=1e-6, rtol=1e-6, err_msg=c)
     assert np.all(np.abs(res["f_reflect_z"]) <= 20.0 + 1e-9)
     from boomfmi.system import FmuError, FmuInstance
     with FmuInstance(fmu) as inst, pytest.raises(FmuError) as err:

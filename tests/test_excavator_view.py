@@ -2,7 +2,8 @@
 kinematics, the live feed, and the page in headless Chromium (Debian's chromium and
 chromium-driver; skipped with the reason where they are missing): all four joint angles
 drawn equal the recording's, the model's ghost, the estimated tip force's arrow beside
-the true one, and no request leaves the machine.
+the true one, and no request leaves the machine; the video export of an excavator run;
+and the page live beside ``boomfmi simulate build/excavator.ssp --view``.
 
 The run file is, for now, a *kinematic* trajectory: each piston driven at a speed in
 proportion to its valve's opening in the digging cycle (``experiments.digging_cycle``),
@@ -137,10 +138,48 @@ def test_a_run_missing_one_machine_column_is_named(runs, tmp_path):
         load_run(path)
 
 
-def test_export_refuses_an_excavator_run_clearly(runs, tmp_path):
-    out = subprocess.run([sys.executable, "-m", "boomfmi.cli", "view", "--replay", str(runs["run"]), "--export",
-                          str(tmp_path / "v.gif")], capture_output=True, text=True, timeout=60)
-    assert out.returncode == 1 and "is an excavator's: replay it on the page" in out.stderr
+# -- export -----------------------------------------------------------------------------------
+def test_export_renders_an_excavator_recording_to_gif(tmp_path):
+    from PIL import Image
+    from boomfmi.rig.excavator import run_excavator_offline
+    rec = write_recording(tmp_path / "dig.csv", run_excavator_offline({"machine": "excavator"}, digging_cycle(), 1.0))
+    gif = tmp_path / "dig.gif"
+    out = subprocess.run([sys.executable, "-m", "boomfmi.cli", "view", "--replay", str(rec), "--export", str(gif),
+                          "--fps", "4", "--size", "480x270"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    with Image.open(gif) as im:
+        assert im.size == (480, 270) and im.n_frames == 5
+
+
+def test_the_export_draws_the_recording_s_angles_and_the_tip_forces(runs):
+    """The exported picture's links are the linkage's forward kinematics at the run's
+    angles, in the side (x-z) and top (x-y) views, the ghost the model's; in the soil both
+    tip forces are arrows whose heads are beside the tip."""
+    import matplotlib.pyplot as plt
+    from boomfmi.view.export import EXCAVATOR_LINKS, TIP_SIDE, ExcavatorDrawing
+    run = load_run(runs["run"])
+    d, tc = runs["data"], contact_time(runs["data"])
+    drawing = ExcavatorDrawing(run, 640, 360)
+    try:
+        drawing.show(tc)
+        at = lambda col: float(np.interp(tc, d["t"], d[col]))
+        for lines, suffix in ((drawing.machine, "_measured"), (drawing.ghost, "")):
+            fk = excavator.forward_kinematics(np.array([at(f"angle_{j}{suffix}") for j in JOINTS]))
+            for (_, k), view in zip(drawing.views, lines):
+                for name, a, b, _ in EXCAVATOR_LINKS:
+                    xs, ys = view[name].get_data()
+                    assert list(xs) == pytest.approx([fk[a][0], fk[b][0]], abs=1e-9)
+                    assert list(ys) == pytest.approx([fk[a][k], fk[b][k]], abs=1e-9)
+        tip = run.frame(tc)["machine"]["points"]["tip"]
+        for key in ("f_tip_est", "f_tip"):
+            for (_, k), arrow in zip(drawing.views, drawing.arrows[key]):
+                assert arrow.get_visible()
+                head = arrow._posA_posB[1]                 # (matplotlib has no getter)
+                assert np.hypot(head[0] - tip[0], head[1] - tip[k]) <= TIP_SIDE + 1e-9
+        drawing.show(10.0)                                               # out of the soil: none
+        assert not any(a.get_visible() for arrows in drawing.arrows.values() for a in arrows)
+    finally:
+        plt.close(drawing.fig)
 
 
 def test_live_excavator_samples_reach_the_hub_as_frames():
@@ -200,7 +239,7 @@ def test_a_live_excavator_sample_missing_a_joint_is_refused():
 
 
 # -- the page in headless Chromium --------------------------------------------------------------
-from test_view import CHROMIUM, CHROMEDRIVER, View, _severe, _wait, driver  # noqa: E402,F401  (one browser set-up)
+from test_view import CHROMIUM, CHROMEDRIVER, View, _free_port, _severe, _wait, driver  # noqa: E402,F401  (one browser set-up)
 
 browser = pytest.mark.skipif(not (CHROMIUM and CHROMEDRIVER),
                              reason="Debian's chromium and chromium-driver are not installed (./test.sh installs them as root)")
@@ -266,6 +305,42 @@ def test_the_page_replays_a_machine_alone_without_ghost_or_estimate(runs, driver
         assert s["machineVisible"] and not s["ghostVisible"] and not s["arrowEst"]["visible"]
         for j in JOINTS:
             assert s["machineAngles"][j] == pytest.approx(float(np.interp(4.0, data["t"], data[f"angle_{j}"])), abs=1e-6)
+        assert _severe(driver) == []
+    finally:
+        view.stop()
+
+
+EXCAVATOR_SSP = ROOT / "build" / "excavator.ssp"
+
+
+@browser
+@pytest.mark.skipif(not EXCAVATOR_SSP.is_file(), reason="build/excavator.ssp is not built (build_fmus.py linkage)")
+def test_live_view_beside_a_running_excavator_cosimulation(driver, tmp_path):
+    import os
+    udp = _free_port()
+    key_file = tmp_path / "link.key"                 # the view checks with a key file, simulate signs from the env
+    key_file.write_bytes(KEY)
+    view = View("--live", f"udp://127.0.0.1:{udp}", "--key-file", str(key_file),
+                env={k: v for k, v in os.environ.items() if k != "BOOMFMI_LINK_KEY"})
+    try:
+        driver.get(view.url)
+        _wait(driver, "return window.boomView.connected && window.boomView.mode === 'live'")
+        out = tmp_path / "live.csv"
+        sim = subprocess.run([sys.executable, "-m", "boomfmi.cli", "simulate", str(EXCAVATOR_SSP), "--experiment",
+                              "digging_cycle", "--stop", "1.0", "--view", f"udp://127.0.0.1:{udp}", "--out", str(out)],
+                             capture_output=True, text=True, timeout=120,
+                             env={**os.environ, "BOOMFMI_LINK_KEY": KEY.decode()})
+        assert sim.returncode == 0, sim.stderr
+        s = _wait(driver, "const s = window.boomView.state(); return window.boomView.framesReceived > 20 "
+                          "&& s && s.kind === 'excavator' && s")
+        assert driver.execute_script("return window.boomView.hello.scene.kind") == "excavator"
+        assert s["machineVisible"] and not s["ghostVisible"]               # the model alone: drawn as the machine
+        data = pd.read_csv(out)
+        assert 0.0 < s["t"] <= 1.0
+        for j in JOINTS:
+            assert s["machineAngles"][j] == pytest.approx(float(np.interp(s["t"], data["t"], data[f"angle_{j}"])),
+                                                          abs=2e-3), j
+        assert s["fTip"] == [0.0, 0.0, 0.0]                                 # the force the linkage was given
         assert _severe(driver) == []
     finally:
         view.stop()

@@ -13,7 +13,18 @@ from boomfmi.system.instance import run_table
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.parametrize("name", ["valve", "cylinder", "boom_load", "force_estimator"])
+#: the FMUs whose reference pair is replayed here (linkage's: tests/test_linkage.py)
+NAMES = ["valve", "cylinder", "boom_load", "force_estimator", "excavator_force_estimator"]
+
+
+def test_every_generated_reference_is_on_disk_and_replayed():
+    from boomfmi.fmubuild.references import INPUTS, paths
+    assert set(INPUTS) == set(NAMES) | {"linkage"}
+    for name in INPUTS:
+        assert all(p.is_file() for p in paths(ROOT / "fmus" / name)), name
+
+
+@pytest.mark.parametrize("name", NAMES)
 def test_reference_result(fmu, name):
     folder = ROOT / "fmus" / name
     inputs = pd.read_csv(folder / f"{name}_in.csv")

@@ -11,6 +11,19 @@ the same filter; the estimate then a first-order low-pass (``tau_est``).  ``f_re
 the joystick's 3-axis force command, is ``gain * f_est`` per axis, saturated to
 +-``f_max`` and rate-limited to ``rate_max``.  All outputs are states updated once per
 communication step (no direct feedthrough).
+
+What the joints can tell (``docs/excavator.md``, "Tip force: what the joints can
+tell"): the least-squares ``f_est`` always has a value, a guess where the joints carry
+no information on a direction.  Beside it, each step, ``n_informative`` counts the
+informative joints (``informative_joints``: sliding, by both the fast filter and a
+slower one of corner ``f_info``, above ``v_info``, and off both end stops), and
+``determined_x/y/z`` says whether their rows of the Jacobian transpose determine that
+world component of the tip force (``tip_force_determined``; with the swing resting or
+on its stop, x and y are not determined wherever the upper structure is turned).
+``f_det_x/y/z`` is the tip force from the informative joints alone (the same low-pass
+``tau_est``) where ``determined_*`` is true; where it is false (the physics' ``nan``,
+which an FMI output cannot carry) it holds its last determined value, 0 before the
+first.  A host reads ``f_det_*`` only together with ``determined_*``.
 """
 import math
 from dataclasses import replace
@@ -37,7 +50,8 @@ def _friction(joint):
 
 class ExcavatorForceEstimator(BoomSlave):
     description = ("Excavator tip force estimation: per-joint load observers combined by least squares over the "
-                   "Jacobian transpose, and 3-axis joystick force reflection")
+                   "Jacobian transpose, which components the sliding joints determine, and 3-axis joystick "
+                   "force reflection")
     variables = (
         *(v for j in JOINTS for v in (
             input(f"p_a_{j}", 0.0, "Pa", f"measured pressure in the {j} cylinder's chamber A (cap side), gauge"),
@@ -51,6 +65,13 @@ class ExcavatorForceEstimator(BoomSlave):
                  "rate-limited") for c in _AXES),
         output("residual", 0.0, "N.m", "misfit |J^T f - tau| of the four joints' torques to the estimated tip force",
                min=0.0),
+        output("n_informative", 0, "1", "number of informative joints (sliding, off their end stops), whose "
+               "torques alone give f_det", min=0, max=len(JOINTS), type="Integer"),
+        *(output(f"determined_{c}", False, "1", f"true where the informative joints determine the tip force's world "
+                 f"{c} component (then f_det_{c} is their estimate); false: cannot tell, f_est_{c} is a guess",
+                 type="Boolean") for c in _AXES),
+        *(output(f"f_det_{c}", 0.0, "N", f"tip force, world {c}, from the informative joints alone where "
+                 f"determined_{c}; else held at its last determined value (0 before the first)") for c in _AXES),
         *(v for j in JOINTS for v in _friction(j)),
         parameter("payload", 0.0, "kg", "payload in the bucket (identified)", min=0.0),
         parameter("P_atm", reference_rig.P_atm, "Pa", "atmospheric pressure (gauge to absolute)", min=0.0),
@@ -60,6 +81,10 @@ class ExcavatorForceEstimator(BoomSlave):
         parameter("v_rest", 2e-3, "m/s", "below this filtered piston speed a cylinder counts as at rest", min=0.0),
         parameter("rest_weight", 0.3, "1", "least-squares weight of a joint at rest (1: a sliding joint's)", min=0.0),
         parameter("stop_weight", 0.02, "1", "least-squares weight of a joint at an end stop", min=0.0),
+        parameter("v_info", 1e-3, "m/s", "above this piston speed (by both filters) a sliding joint is informative",
+                  min=0.0),
+        parameter("f_info", 3.0, "Hz", "corner frequency of the slower filter of the angles that tells sliding joints",
+                  min=0.0),
         parameter("gain", 0.05, "1", "joystick force per estimated force", min=0.0),
         parameter("f_max", 20.0, "N", "joystick force saturation, per axis", min=0.0),
         parameter("rate_max", 500.0, "N/s", "joystick force rate limit, per axis", min=0.0),
@@ -71,12 +96,15 @@ class ExcavatorForceEstimator(BoomSlave):
         self._f = np.zeros(3)
         self._r = np.zeros(3)
         self._res = 0.0
+        self._n_info = 0
+        self._det = np.zeros(3, bool)
+        self._f_det = np.zeros(3)
         self._state = None
 
     def setup(self):
-        for name in ("payload", "tau_est", "v_rest", "rest_weight", "stop_weight", "gain"):
+        for name in ("payload", "tau_est", "v_rest", "rest_weight", "stop_weight", "gain", "v_info"):
             require_non_negative(name, getattr(self, name))
-        for name in ("f_motion", "f_max", "rate_max", "P_atm"):
+        for name in ("f_motion", "f_info", "f_max", "rate_max", "P_atm"):
             require_positive(name, getattr(self, name))
         acts = {j: replace(getattr(_EX, j), K_v=getattr(self, f"K_v_{j}"), F_s=getattr(self, f"F_s_{j}"),
                            F_d=getattr(self, f"F_d_{j}")) for j in JOINTS}
@@ -87,6 +115,9 @@ class ExcavatorForceEstimator(BoomSlave):
         self._f = np.zeros(3)
         self._r = np.zeros(3)
         self._res = 0.0
+        self._n_info = 0
+        self._det = np.zeros(3, bool)
+        self._f_det = np.zeros(3)
         self._state = None
 
     def step(self, t, dt):
@@ -97,11 +128,19 @@ class ExcavatorForceEstimator(BoomSlave):
             self._state = observer_start(q, p_a, p_b, self._ex)
         self._state, self._f, self._res, _ = observer_step(self._state, q, p_a, p_b, dt, self._omega, self._ex,
                                                            self.payload, self.tau_est, self.v_rest,
-                                                           self.rest_weight, self.stop_weight)
+                                                           self.rest_weight, self.stop_weight, self.v_info,
+                                                           self.f_info)
         self._r = reflected_force_3d(self._f, self._r, dt, self.gain, self.f_max, self.rate_max)
+        self._n_info = int(np.sum(self._state["informative"]))
+        self._det = np.array(self._state["determined"], bool)
+        self._f_det = np.where(self._det, self._state["f_known"], self._f_det)    # held where undetermined
 
 
 for _i, _c in enumerate(_AXES):
     setattr(ExcavatorForceEstimator, f"f_est_{_c}", property(lambda self, i=_i: float(self._f[i])))
     setattr(ExcavatorForceEstimator, f"f_reflect_{_c}", property(lambda self, i=_i: float(self._r[i])))
 ExcavatorForceEstimator.residual = property(lambda self: float(self._res))
+ExcavatorForceEstimator.n_informative = property(lambda self: self._n_info)
+for _i, _c in enumerate(_AXES):
+    setattr(ExcavatorForceEstimator, f"determined_{_c}", property(lambda self, i=_i: bool(self._det[i])))
+    setattr(ExcavatorForceEstimator, f"f_det_{_c}", property(lambda self, i=_i: float(self._f_det[i])))

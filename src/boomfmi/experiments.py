@@ -290,14 +290,25 @@ def excavator_manoeuvres(seed: int = 0, duration: float = 20.0) -> Callable[[flo
     return per_joint({j: manoeuvres(s, duration) for j, s in zip(JOINTS, _joint_seeds(seed))})
 
 
-def excavator_excitation(seed: int = 0, duration: float = 24.0, hold=(0.2, 0.9)) -> Callable[[float], dict]:
+def excavator_excitation(seed: int = 0, duration: float = 24.0, hold=(0.08, 0.35),
+                         opening=(0.04, 4.5), reverse: float = 0.85) -> Callable[[float], dict]:
     """The richer excitation for identifying each joint: blocks of 1.5 to 3 s in which
     one or two joints (drawn from ``seed``, every joint in turn at least once in each
-    round of four blocks) take random steps both ways (0.5 to 4.5 V or 5.5 to 9.5 V,
-    held ``hold`` seconds, some at exactly 5 V) while the others rest at the centre.
-    A joint moving alone separates its own friction and mass from the others'; two
-    together excite the linkage's coupling."""
+    round of four blocks) take short steps (``hold`` seconds) while the others rest at
+    the centre, every joint at rest between blocks.
+
+    A step opens the valve by an offset drawn log-uniform over ``opening`` [V] from the
+    centre (15 % of steps are exactly at the centre, 5 V) and reverses the previous
+    step's direction with probability ``reverse``.  Short steps that mostly reverse
+    keep a fast light joint (the bucket crosses its 50 mm stroke in half a second) in
+    mid-stroke instead of on its stops; the small openings make it slide slowly, where
+    the flow rather than the viscous friction sets the speed, so that K_v and F_d are
+    seen at many speeds rather than at one (at one speed only K_v v + F_d is); each
+    reversal and each step from the centre is a start from rest for F_s.  A joint
+    moving alone separates its own friction and mass from the others'; two together
+    excite the linkage's coupling."""
     rng = np.random.default_rng(seed)
+    lo, hi = math.log(opening[0]), math.log(opening[1])
     segments, t = [], 0.0
     while t < duration:
         for lead in rng.permutation(len(JOINTS)):
@@ -307,12 +318,17 @@ def excavator_excitation(seed: int = 0, duration: float = 24.0, hold=(0.2, 0.9))
             if rng.random() < 0.4:
                 moving.add(JOINTS[int(rng.integers(len(JOINTS)))])
             block_end = t + float(rng.uniform(1.5, 3.0))
+            sign = {j: float(rng.choice([-1.0, 1.0])) for j in sorted(moving)}
             while t < block_end:
                 d = float(rng.uniform(*hold))
                 us = {}
                 for j in sorted(moving):
-                    kind = rng.choice(3, p=[0.45, 0.4, 0.15])
-                    us[j] = float(rng.uniform(0.5, 4.5) if kind == 0 else rng.uniform(5.5, 9.5) if kind == 1 else CENTRE)
+                    if rng.random() < 0.15:
+                        us[j] = CENTRE
+                        continue
+                    if rng.random() < reverse:
+                        sign[j] = -sign[j]
+                    us[j] = CENTRE + sign[j] * math.exp(rng.uniform(lo, hi))
                 segments.append((d, us))
                 t += d
             d = float(rng.uniform(0.2, 0.4))               # every joint at rest between blocks

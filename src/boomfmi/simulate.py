@@ -92,6 +92,23 @@ def live_columns(cosim, bridges: list[str], P_atm: float) -> dict[str, tuple[str
     return cols
 
 
+def simulate_with_view(cosim, stop_time: float, inputs, progress: bool, view: str | None,
+                       view_key: bytes | None, columns: dict[str, tuple[str, float]], geom=None) -> pd.DataFrame:
+    """``cosim.simulate``; with ``view`` (udp://HOST:PORT), each row also goes to ``boomfmi
+    view --live`` as a sample of ``columns`` (sample name -> (result column, offset)) and
+    the boom's ``geom`` (none for the excavator), signed with ``view_key``
+    (``view.live.LiveSender``)."""
+    sender = None
+    if view:
+        from .view.live import LiveSender
+        sender = LiveSender(view, columns, geom, key=view_key)
+    try:
+        return cosim.simulate(stop_time, inputs, progress=progress, monitor=sender)
+    finally:
+        if sender is not None:
+            sender.close()
+
+
 def bound_value(cosim, name: str) -> float:
     """The value the system binds to any component's parameter ``name`` (the first
     binding found), else the reference rig's."""
@@ -131,7 +148,7 @@ def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
                          f"for the whole excavator one of {', '.join(EXCAVATOR_PROFILES)}, or a recording (.csv)")
     with CoSimulation(ssp, step, algorithm, parameters) as cosim:
         if any(i.model_description.modelName == "linkage" for i in cosim.instances.values()):
-            return run_excavator(cosim, experiment, stop_time, progress)
+            return run_excavator(cosim, experiment, stop_time, progress, view, view_key)
         names = {n: {v.name for v in i.model_description.modelVariables if v.causality == "parameter"}
                  for n, i in cosim.instances.items()}
         over = rig_parameters(experiment, names)
@@ -151,17 +168,9 @@ def run_experiment(ssp, experiment: str = "paper_multistep", step: float = 1e-3,
         bridges = [n for n, i in cosim.instances.items() if i.model_description.modelName == "hardware_bridge"]
         inputs, duration = experiment_inputs(experiment, u_names)
         P_atm = bound_value(cosim, "P_atm")
-        sender = None
-        if view:
-            from .view.live import LiveSender
-            geom = [bound_value(cosim, g) for g in ("a", "b", "h", "l_min")]
-            sender = LiveSender(view, live_columns(cosim, bridges, P_atm), geom, key=view_key)
-        try:
-            result = cosim.simulate(stop_time if stop_time is not None else duration, inputs,
-                                    progress=progress, monitor=sender)
-        finally:
-            if sender is not None:
-                sender.close()
+        geom = [bound_value(cosim, g) for g in ("a", "b", "h", "l_min")]
+        result = simulate_with_view(cosim, stop_time if stop_time is not None else duration, inputs, progress,
+                                    view, view_key, live_columns(cosim, bridges, P_atm), geom)
         outputs = [c for c in result.columns if c.count(".") == 1 and c not in cosim.inputs
                    and c.partition(".")[0] not in bridges and c.rpartition(".")[2] in RECORDED]
     model_u = [n for n in u_names if n.partition(".")[0] not in bridges] or u_names
@@ -221,26 +230,42 @@ def excavator_inputs(experiment: str, valves: dict[str, str]):
     return table, float(rec.data["t"].iloc[-1])
 
 
-def run_excavator(cosim, experiment: str, stop_time: float | None = None, progress: bool = False) -> pd.DataFrame:
+def excavator_columns(cosim, wiring: dict[str, tuple[str, str, str]]) -> dict[str, tuple[str, float]]:
+    """The whole excavator's run columns -> (result column, offset), in their order (see
+    :func:`run_excavator`): the offset turns the cylinders' absolute pressures into gauge."""
+    P_atm = bound_value(cosim, "P_atm")
+    cols = {f"u_{j}": (f"{valve}.u", 0.0) for j, (link, cyl, valve) in wiring.items()}
+    for q in ("p_a", "p_b"):
+        cols.update({f"{q}_{j}": (f"{cyl}.{q}", -P_atm) for j, (link, cyl, valve) in wiring.items()})
+    for q in ("angle", "x", "v"):
+        cols.update({f"{q}_{j}": (f"{link}.{q}_{j}", 0.0) for j, (link, cyl, valve) in wiring.items()})
+    link = next(iter(wiring.values()))[0]
+    cols.update({f"f_tip_{c}": (f"{link}.f_tip_{c}", 0.0) for c in "xyz"})
+    return cols
+
+
+def run_excavator(cosim, experiment: str, stop_time: float | None = None, progress: bool = False,
+                  view: str | None = None, view_key: bytes | None = None) -> pd.DataFrame:
     """The whole excavator's run in the excavator recording's columns: ``t``, per joint
     ``u_<j>``, ``p_a_<j>``, ``p_b_<j>`` (gauge [Pa]), ``angle_<j>``, then ``x_<j>``,
     ``v_<j>`` and the tip force ``f_tip_x``, ``f_tip_y``, ``f_tip_z`` the linkage was
-    given (0 unless a parameter set drives it)."""
+    given (0 unless a parameter set drives it).  ``view`` streams the run to ``boomfmi
+    view --live`` as the excavator's samples: those of these columns the live view's
+    schema has (``view.live.BOUNDS``: the model's ``angle_<j>``, ``p_a_<j>``, ``p_b_<j>``
+    and ``f_tip_<a>``)."""
     wiring = excavator_wiring(cosim)
     inputs, duration = excavator_inputs(experiment, {j: w[2] for j, w in wiring.items()})
-    P_atm = bound_value(cosim, "P_atm")
-    result = cosim.simulate(stop_time if stop_time is not None else duration, inputs, progress=progress)
+    columns = excavator_columns(cosim, wiring)
+    live = {}
+    if view:
+        from .view.live import BOUNDS
+        live = {k: c for k, c in columns.items() if k in BOUNDS}
+    result = simulate_with_view(cosim, stop_time if stop_time is not None else duration, inputs, progress,
+                                view, view_key, live)
     out = {"t": result["time"]}
-    for j, (link, cyl, valve) in wiring.items():
-        out[f"u_{j}"] = result[f"{valve}.u"]
-    for q in ("p_a", "p_b"):
-        for j, (link, cyl, valve) in wiring.items():
-            out[f"{q}_{j}"] = result[f"{cyl}.{q}"] - P_atm
-    for q in ("angle", "x", "v"):
-        for j, (link, cyl, valve) in wiring.items():
-            out[f"{q}_{j}"] = result[f"{link}.{q}_{j}"]
-    link = next(iter(wiring.values()))[0]
-    for c in "xyz":
-        name = f"{link}.f_tip_{c}"
-        out[f"f_tip_{c}"] = result[name] if name in result else 0.0
+    for name, (col, offset) in columns.items():
+        if col not in result and name.startswith("f_tip_"):      # the linkage's tip force, not recorded
+            out[name] = 0.0
+        else:
+            out[name] = result[col] + offset if offset else result[col]
     return pd.DataFrame(out)

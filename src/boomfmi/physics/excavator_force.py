@@ -138,7 +138,7 @@ def observer_start(angles, p_a, p_b, ex: exc.Excavator = exc.Excavator()):
     x = exc.pistons_from_angles(np.asarray(angles, float), ex)
     F = exc.cylinder_forces(p_a, p_b, ex)
     return {"x_slow": x, "v_slow": np.zeros(4), "x": x, "v": np.zeros(4), "F": F, "dF": np.zeros(4), "f": np.zeros(3), "f_known": np.full(3, np.nan),
-            "informative": np.zeros(4, bool)}
+            "informative": np.zeros(4, bool), "determined": np.zeros(3, bool)}
 
 
 def observer_step(state: dict, angles, p_a, p_b, dt: float, omega: float, ex: exc.Excavator = exc.Excavator(),
@@ -154,7 +154,8 @@ def observer_step(state: dict, angles, p_a, p_b, dt: float, omega: float, ex: ex
     sliding by a slower filter of the angles, corner ``f_info`` [Hz], above ``v_info``
     [m/s]; their torques by the sliding law in that direction) as
     ``state["f_known"]``, ``nan`` where they do not determine a component
-    (:func:`tip_force_determined`), and their mask as ``state["informative"]``."""
+    (:func:`tip_force_determined`), their mask as ``state["informative"]`` and the
+    determined components (bool per world axis) as ``state["determined"]``."""
     xm = exc.pistons_from_angles(np.asarray(angles, float), ex)
     Fm = exc.cylinder_forces(p_a, p_b, ex)
     xs, vs, v_mean, a_mean = [], [], np.empty(4), np.empty(4)
@@ -185,10 +186,10 @@ def observer_step(state: dict, angles, p_a, p_b, dt: float, omega: float, ex: ex
     info = informative_joints(xm, v_both, ex, v_info) & informative_joints(x_mid, v_both, ex, v_info)
     tau_i, _, _ = observed_joint_torques(x_mid, v_mean, a_mean, F_mid, ex, payload, v_rest,
                                          sliding=np.where(info, np.sign(v_slow), 0.0))
-    f_det, _ = tip_force_determined(q, tau_i, info, ex)
+    f_det, known = tip_force_determined(q, tau_i, info, ex)
     new = {"x_slow": x_slow, "v_slow": v_slow, "x": np.asarray(xs), "v": np.asarray(vs), "F": F_new, "dF": dF_new, "f": f_est,
            "f_known": _low_pass_known(state.get("f_known", np.full(3, np.nan)), f_det, dt, tau_est),
-           "informative": info}
+           "informative": info, "determined": known}
     return new, f_est, residual, tau
 
 

@@ -12,9 +12,10 @@ file or ``$BOOMFMI_LINK_KEY``; the feed never runs unauthenticated).  The object
 flat sample in the run's column names (``t``; the model's ``alpha, x, p_a, p_b``; the
 machine's ``alpha_measured, x_measured, p_a_measured, p_b_measured``; ``f_est, f_ext,
 f_reflect``; gauge pressures [Pa]; null where the value is not a finite number) with the
-boom's geometry ``geom`` = [a, b, h, l_min] [m] and the feed's own fields: ``session``
-(16 hex digits the sender draws at random), ``seq`` (strictly increasing within the
-session) and ``sent`` (the sender's wall clock, Unix time [s]).
+boom's geometry ``geom`` = [a, b, h, l_min] [m] (an excavator's sample has none) and the
+feed's own fields: ``session`` (16 hex digits the sender draws at random), ``seq``
+(strictly increasing within the session) and ``sent`` (the sender's wall clock, Unix
+time [s]).
 
 The sender keeps to ``rate`` datagrams per second of wall time, whatever the
 simulation's pace, and never blocks: a view that is not running loses the datagrams,
@@ -235,16 +236,18 @@ class LiveSender:
     each recorded row and sends it, signed with ``key``, to ``url`` (udp://HOST:PORT).
 
     ``columns`` maps a sample name to ``(column, offset)``: the value sent is
-    ``row[column] + offset`` (the offset turns an absolute pressure into gauge)."""
+    ``row[column] + offset`` (the offset turns an absolute pressure into gauge).
+    ``geom`` is the boom's [a, b, h, l_min]; None (the excavator's samples) sends none."""
 
-    def __init__(self, url: str, columns: dict[str, tuple[str, float]], geom, rate: float = DEFAULT_RATE,
+    def __init__(self, url: str, columns: dict[str, tuple[str, float]], geom=None, rate: float = DEFAULT_RATE,
                  key: bytes | None = None):
         if not rate > 0:
             raise ValueError(f"the live view's rate must be > 0 per second, not {rate!r}")
         if not key:
             key = load_key()                 # $BOOMFMI_LINK_KEY, else LinkError
         self.address = parse_address(url)
-        self.columns, self.geom, self.period = columns, [float(v) for v in geom], 1.0 / rate
+        self.columns, self.period = columns, 1.0 / rate
+        self.geom = None if geom is None else [float(v) for v in geom]
         self.key, self.session, self.seq = key, secrets.token_hex(8), 0
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setblocking(False)
@@ -261,8 +264,9 @@ class LiveSender:
             where = {n: i for i, n in enumerate(names)}
             self._index = {k: (where[c], off) for k, (c, off) in self.columns.items() if c in where}
         self.seq += 1
-        sample = {"session": self.session, "seq": self.seq, "sent": time.time(),
-                  "t": float(row[0]), "geom": self.geom}
+        sample = {"session": self.session, "seq": self.seq, "sent": time.time(), "t": float(row[0])}
+        if self.geom is not None:
+            sample["geom"] = self.geom
         for k, (i, off) in self._index.items():
             v = float(row[i]) + off
             sample[k] = v if math.isfinite(v) else None
