@@ -8,6 +8,7 @@
                                         (an excavator experiment, e.g. digging_cycle, through excavator_bridge.fmu)
     boomfmi identify RUN.csv [RUN.csv ...] [--method paper|fit] [--a-max] [--holdout H.csv] --out params.json
     boomfmi diagnose FIT.csv [FIT.csv ...] --holdout HOLD.csv [HOLD.csv ...] --out DIR
+                                        (the boom's recordings, or the whole excavator's: per joint)
     boomfmi campaign MANIFEST.csv --out DIR [--scheduler ADDRESS] [--workers N]
     boomfmi fleet --machines 8 --weeks 6 --out DIR   a virtual fleet's recordings and manifest
     boomfmi describe FMU [FMU ...]      the FMUs' interfaces as Markdown tables
@@ -203,6 +204,9 @@ def _record(args) -> int:
 
 
 def _identify(args) -> int:
+    from .recording import common_kind
+    if common_kind([*args.recordings, *args.holdout]) == "excavator":
+        return _identify_excavator(args)
     from .identify import identify_recordings, write_outputs
     result, recs, _ = identify_recordings(args.recordings, args.method, args.a_max, args.cutoff, args.eq13)
     doc = write_outputs(result, recs, args.out, args.holdout)
@@ -217,7 +221,26 @@ def _identify(args) -> int:
     return 0
 
 
+def _identify_excavator(args) -> int:
+    """``identify`` on the whole excavator's recordings: each cylinder's friction and the payload."""
+    if args.method != "fit" or args.a_max:
+        raise ValueError("the whole excavator's recordings are identified by the fit per joint (K_v, F_s, F_d of "
+                         "each cylinder and the payload): --method paper and --a-max are the boom's")
+    from .identify.excavator_outputs import identify_excavator_recordings, summary_lines, write_excavator_outputs
+    say = _progress("identify")
+    say(f"identifying the whole excavator per joint on {len(args.recordings)} recording(s)")
+    result, recs, ex = identify_excavator_recordings(args.recordings, args.cutoff)
+    doc = write_excavator_outputs(result, recs, args.out, args.holdout, ex, progress=say)
+    for line in summary_lines(doc):
+        print(line)
+    print("wrote " + ", ".join(doc["written"]))
+    return 0
+
+
 def _diagnose(args) -> int:
+    from .recording import common_kind
+    if common_kind([*args.recordings, *args.holdout]) == "excavator":
+        return _diagnose_excavator(args)
     from .diagnose import diagnose
     doc = diagnose(args.recordings, args.holdout, args.out, ssp=args.ssp,
                    progress=lambda text: print(f"diagnose: {text}", file=sys.stderr, flush=True))
@@ -241,6 +264,19 @@ def _diagnose(args) -> int:
                   f"{c.get('reference_shrink', float('nan')):.2f}, {'agreeing' if c.get('agrees') else 'DISAGREEING'}")
         elif "skipped" in c or "error" in c:
             print(f"not confirmed through the FMUs: {c.get('skipped') or c.get('error')}")
+    print(f"wrote {args.out}/diagnosis.json and {args.out}/report.html")
+    return 0
+
+
+def _diagnose_excavator(args) -> int:
+    """``diagnose`` on the whole excavator's recordings: per joint, which joint and which effect."""
+    if args.ssp is not None:
+        raise ValueError("--ssp confirms a boom verdict through the boom's FMUs; the whole excavator's per-joint "
+                         "diagnosis has no confirmation through the FMUs")
+    from .diagnose.excavator_report import diagnose_excavator_recordings, summary_lines
+    doc = diagnose_excavator_recordings(args.recordings, args.holdout, args.out, progress=_progress("diagnose"))
+    for line in summary_lines(doc):
+        print(line)
     print(f"wrote {args.out}/diagnosis.json and {args.out}/report.html")
     return 0
 
@@ -412,7 +448,8 @@ def main(argv=None) -> int:
     p.add_argument("--retries", type=int, default=2)
     p.add_argument("--loss-budget", type=int, default=20, help="consecutive lost answers before giving up")
     p.set_defaults(run=_record)
-    p = sub.add_parser("identify", help="identify the model's parameters from recordings")
+    p = sub.add_parser("identify", help="identify the model's parameters from recordings (the boom's, or the whole "
+                                        "excavator's: each cylinder's K_v, F_s, F_d and the payload)")
     p.add_argument("recordings", nargs="+", type=Path)
     p.add_argument("--method", choices=("fit", "paper"), default="fit",
                    help="fit: least squares on all samples, with intervals (default); paper: Eq. 13 to 17")
@@ -424,7 +461,8 @@ def main(argv=None) -> int:
                    help="paper method: Eq. 13 as printed, or as derived from the force balances")
     p.add_argument("--out", type=Path, required=True, help="params.json (params.ssv and params.png go beside it)")
     p.set_defaults(run=_identify)
-    p = sub.add_parser("diagnose", help="where the model and the machine disagree, and which effect explains it")
+    p = sub.add_parser("diagnose", help="where the model and the machine disagree, and which effect explains it "
+                                        "(for the whole excavator's recordings: which joint, and which effect)")
     p.add_argument("recordings", nargs="+", type=Path, help="FIT recordings: identify the baseline, fit the effects")
     p.add_argument("--holdout", type=Path, nargs="+", required=True,
                    help="HOLD recordings, never fitted on: every figure of shrink is measured on them")
@@ -453,7 +491,7 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, required=True, help="folder: recordings, manifest.csv, truth.json")
     p.set_defaults(run=_fleet)
     p = sub.add_parser("view", help="the virtual boom or whole excavator in a browser, from a run file or live; "
-                                    "or a video of the boom")
+                                    "or a video of either")
     source = p.add_mutually_exclusive_group(required=True)
     source.add_argument("--replay", type=Path, metavar="RUN.csv",
                         help="a recording, the boom's or the excavator's (its kind read from its columns), or "

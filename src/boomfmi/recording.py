@@ -101,6 +101,22 @@ def recording_kind(source) -> str:
     return "excavator" if any(c in excavator for c in columns) else "boom"
 
 
+def common_kind(paths) -> str:
+    """The one kind (:func:`recording_kind`, by the header) of all the recordings at
+    ``paths``; ``ValueError`` naming each kind's files where they mix (a command takes
+    the boom's recordings or the whole excavator's, not both), :class:`RecordingError`
+    for a file that is missing or has no header."""
+    kinds: dict[str, list[str]] = {}
+    for p in paths:
+        kinds.setdefault(recording_kind(p), []).append(str(p))
+    if not kinds:
+        raise ValueError("no recordings given")
+    if len(kinds) > 1:
+        raise ValueError("the recordings mix the boom's and the whole excavator's; give one kind per call: "
+                         f"boom: {', '.join(kinds['boom'])}; excavator: {', '.join(kinds['excavator'])}")
+    return next(iter(kinds))
+
+
 class RecordingError(ValueError):
     """A recording that does not follow the recording format.
 

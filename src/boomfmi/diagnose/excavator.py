@@ -103,13 +103,18 @@ def joint_noise(cut) -> float:
     return sum(float(np.std(m - lowpass(m, cut.fs, 50.0)) / _span(m)) for m in (cut.p_a_raw, cut.p_b_raw))
 
 
-def joint_gap(cut, joint: str, ex: exc.Excavator = exc.Excavator(), effects: dict | None = None) -> float:
-    """The gap of the joint's pneumatics (with ``effects``) on the recording."""
+def joint_pressures(cut, joint: str, ex: exc.Excavator = exc.Excavator(), effects: dict | None = None):
+    """The joint's pneumatics (with ``effects``) on the cut: ``(p_a, p_b)`` [Pa, absolute]."""
     # the cut starts from the first 20 ms's mean pressures, not one noisy sample
     n0 = max(1, int(0.02 * cut.fs))
     start = SimpleNamespace(**{**vars(cut), "p_a_raw": np.r_[np.mean(cut.p_a_raw[:n0]), cut.p_a_raw[1:]],
                                "p_b_raw": np.r_[np.mean(cut.p_b_raw[:n0]), cut.p_b_raw[1:]]})
-    pa, pb = simulate_pneumatics(start, joint_model(joint, ex, effects))
+    return simulate_pneumatics(start, joint_model(joint, ex, effects))
+
+
+def joint_gap(cut, joint: str, ex: exc.Excavator = exc.Excavator(), effects: dict | None = None) -> float:
+    """The gap of the joint's pneumatics (with ``effects``) on the recording."""
+    pa, pb = joint_pressures(cut, joint, ex, effects)
     return _gap(cut, pa, pb)
 
 

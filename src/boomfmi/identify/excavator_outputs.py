@@ -1,0 +1,385 @@
+"""``boomfmi identify`` on the whole excavator's recordings: read, identify, write.
+
+:func:`identify_excavator_recordings` reads and checks excavator recordings
+(``shared/spec/excavator.md``) and identifies each cylinder's Eq. 9 friction (K_v, F_s,
+F_d) and the payload with :func:`boomfmi.identify.excavator.identify_excavator`, the
+linkage's geometry and link masses known.  :func:`write_excavator_outputs` writes, as
+the boom's ``write_outputs`` does and as one set (``outputs.OutputSet``):
+
+- ``params.json``: ``"kind": "excavator"``, every parameter (``K_v_<joint>``,
+  ``F_s_<joint>``, ``F_d_<joint>``, ``payload``, the linkage FMU's own names) with its
+  value, 95 % interval (``null`` where there is none), unit, joint, whether the data
+  identify it (``identified``; else ``cannot_tell`` says why), the name it has in
+  ``build/excavator.ssp`` and the value ``params.ssv`` binds; the warnings, the
+  recordings, and each joint's NRMSE of x, p_a and p_b on every fit and ``--holdout``
+  recording (:func:`excavator_nrmse`);
+- ``params.ssv``: the values bound to the excavator SSP's ``linkage`` component
+  (``linkage.K_v_arm``, ``linkage.payload``...), for ``boomfmi simulate
+  build/excavator.ssp --params params.ssv``;
+- ``params.png``: recorded and simulated x, p_a, p_b of every joint on the first
+  recording.
+
+What ``params.ssv`` binds is what a machine can have (the linkage FMU rejects the rest):
+a negative friction value is left out (the SSP's own value stays; a warning says so),
+F_s is raised to F_d where it is below it (Eq. 9) and a negative payload is bound as 0,
+as :func:`~boomfmi.identify.excavator.identified_machine` does.  The NRMSE are those of
+that same machine.
+
+**The identified machine on a recording** (:func:`simulate_machine`): the monolithic
+reference (``model.excavator_reference``) with the identified values, driven by the
+recording's four commands (and its tip force where it has one), from the recording's
+first state (the pistons from the mean of the first 20 ms of angles, the chambers at
+their mean pressures then), at rest.  Its step ``H`` = 0.5 ms: on the virtual rig's
+digging cycle (5 s, with a payload) within 0.03 % NRMSE of the reference's own 50 us on
+every joint's x and pressures, at a tenth of its cost (about 0.2 s per second recorded).
+
+Only the sidecar's ``P_atm`` applies to an excavator recording: its other rig values
+are the boom's (reference-rig names) and are reported as not applied.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .._json import plain
+from ..outputs import OutputSet
+from ..physics import excavator as exc
+from ..recording import Recording, check_distinct, check_plausible, read_recording
+from ..system.ssv import write_ssv
+from .excavator import JOINT_PARAMS, JOINTS, UNITS, identify_excavator
+from .fit import FitResult
+from .preprocess import CUTOFF
+
+#: The excavator SSP's component that holds the identified parameters (its linkage FMU
+#: declares ``K_v_<joint>``, ``F_s_<joint>``, ``F_d_<joint>`` and ``payload``).
+SSP_COMPONENT = "linkage"
+#: Step of the identified machine's simulation [s] (see the module's docstring).
+H = 5e-4
+#: The least span a channel's error is measured over: a piston that barely moves is
+#: judged against 1 mm, a chamber against half a bar (``diagnose.excavator.P_SPAN_MIN``).
+X_SPAN_MIN = 1e-3
+P_SPAN_MIN = 5e4
+#: The start state is the mean over this first stretch of the recording [s].
+START_WINDOW = 0.02
+CHANNELS = ("x", "p_a", "p_b")
+
+
+def ssp_name(param: str) -> str:
+    """Where an identified parameter lives in the excavator SSP (``linkage.K_v_arm``)."""
+    return f"{SSP_COMPONENT}.{param}"
+
+
+def param_joint(param: str) -> str | None:
+    """The joint a parameter belongs to (``None`` for the payload)."""
+    return param.rsplit("_", 1)[1] if param != "payload" else None
+
+
+def read_excavator_recordings(paths, role: str = "recording") -> list[Recording]:
+    """Read and check excavator recordings (``role`` names them in errors: "fit
+    recording", "holdout"); ``ValueError``/``RecordingError`` naming the file."""
+    recs = []
+    for p in paths:
+        r = read_recording(p)
+        if r.kind != "excavator":
+            raise ValueError(f"{r.path}: a boom recording; this {role} must be the whole excavator's "
+                             f"(u_<joint>, p_a_<joint>, p_b_<joint>, angle_<joint>)")
+        if r.incomplete:
+            raise ValueError(f"{r.path}: the recording is marked incomplete in its sidecar ({r.incomplete}); "
+                             f"record it again")
+        check_plausible(r)
+        recs.append(r)
+    return recs
+
+
+def check_same_rig(recs) -> None:
+    """``ValueError`` where the recordings' sidecars name different rigs."""
+    rigs = {json.dumps(r.rig, sort_keys=True) for r in recs}
+    if len(rigs) > 1:
+        raise ValueError("the recordings come from different rigs (their sidecars' 'rig' values differ): "
+                         + ", ".join(str(r.path) for r in recs))
+
+
+def machine_for(rec: Recording, ex: exc.Excavator | None = None) -> exc.Excavator:
+    """``ex`` (default: ``excavator.md``'s machine) with the recording's P_atm."""
+    ex = ex or exc.Excavator()
+    return replace(ex, P_atm=rec.P_atm) if rec.P_atm != ex.P_atm else ex
+
+
+def sidecar_warnings(recs) -> list[str]:
+    """A warning per recording whose sidecar sets rig values the excavator does not apply."""
+    out = []
+    for r in recs:
+        ignored = sorted(k for k in r.rig if k != "P_atm")
+        if ignored:
+            out.append(f"{r.path}: the sidecar's rig values {', '.join(ignored)} are the boom's; the excavator's "
+                       f"identification and diagnosis use excavator.md's machine (only P_atm applies)")
+    return out
+
+
+def identify_excavator_recordings(paths, cutoff: float = CUTOFF, ex: exc.Excavator | None = None):
+    """Read and check the recordings, identify per joint; ``(FitResult, recordings,
+    Excavator)`` (the machine the identification assumed: ``ex`` with the recordings'
+    P_atm)."""
+    recs = read_excavator_recordings(paths, "fit recording")
+    check_same_rig(recs)
+    return identify_recs(recs, cutoff, ex)
+
+
+def identify_recs(recs, cutoff: float = CUTOFF, ex: exc.Excavator | None = None):
+    """:func:`identify_excavator_recordings` on recordings already read and checked."""
+    ex = machine_for(recs[0], ex)
+    result = identify_excavator(recs, ex, cutoff)
+    result.details["recordings"] = [str(r.path) for r in recs]
+    result.details["cutoff_Hz"] = cutoff
+    result.warnings.extend(sidecar_warnings(recs))
+    return result, recs, ex
+
+
+def cannot_tell(result: FitResult) -> dict[str, str | None]:
+    """Per parameter, why the data cannot tell its value (``None`` where they can): no
+    interval; F_s where its starts do not place it (``identify.excavator``'s stage 2);
+    K_v and F_d where the interval is wider than half the value (its warning's rule)."""
+    out = {}
+    statics = result.details.get("static_friction", {})
+    for name, e in result.params.items():
+        lo, hi = e.ci95
+        joint = param_joint(name)
+        if not (math.isfinite(lo) and math.isfinite(hi) and math.isfinite(e.value)):
+            reason = "no interval"
+            if name.startswith("F_s_") and not statics.get(joint, {}).get("starts", 1):
+                reason = f"no start of motion from rest (F_d_{joint} is used)"
+        elif name.startswith("F_s_") and not statics.get(joint, {}).get("identified", True):
+            reason = "the starts put it anywhere in its interval"
+        elif name != "payload" and not name.startswith("F_s_") and not e.relative_halfwidth < 0.5:
+            reason = "its interval is wider than half its value"
+        else:
+            reason = None
+        out[name] = reason
+    return out
+
+
+def ssv_values(result: FitResult, ex: exc.Excavator) -> tuple[dict[str, float], list[str]]:
+    """What ``params.ssv`` binds (parameter name -> value) and the notes on what it
+    changed or left out (see the module's docstring)."""
+    v = result.values()
+    out, notes = {}, []
+    for j in JOINTS:
+        for n in ("K_v", "F_d"):
+            name = f"{n}_{j}"
+            if math.isfinite(v[name]) and v[name] >= 0.0:
+                out[name] = float(v[name])
+            else:
+                notes.append(f"{name} = {v[name]:.4g} {UNITS[n]} is not physical: params.ssv leaves it out "
+                             f"(the SSP's own {getattr(getattr(ex, j), n):.4g} {UNITS[n]} stays)")
+        F_d = out.get(f"F_d_{j}", getattr(ex, j).F_d)
+        F_s = v[f"F_s_{j}"]
+        if not (math.isfinite(F_s) and F_s >= 0.0):
+            notes.append(f"F_s_{j} = {F_s:.4g} N is not physical: params.ssv binds F_d_{j} = {F_d:.4g} N in its place")
+            F_s = F_d
+        elif F_s < F_d:
+            notes.append(f"F_s_{j} = {F_s:.4g} N is below F_d_{j} = {F_d:.4g} N: params.ssv binds F_d (Eq. 9 wants "
+                         f"F_s >= F_d)")
+            F_s = F_d
+        out[f"F_s_{j}"] = float(F_s)
+    payload = v["payload"]
+    if math.isfinite(payload):
+        if payload < 0.0:
+            notes.append(f"payload = {payload:.4g} kg is below 0: params.ssv binds 0 kg")
+        out["payload"] = max(0.0, float(payload))
+    ordered = {f"{n}_{j}": out[f"{n}_{j}"] for j in JOINTS for n in JOINT_PARAMS if f"{n}_{j}" in out}
+    if "payload" in out:
+        ordered["payload"] = out["payload"]
+    return ordered, notes
+
+
+def bound_machine(values: dict[str, float], ex: exc.Excavator) -> tuple[exc.Excavator, float]:
+    """``(Excavator, payload)``: ``ex`` with the values ``params.ssv`` binds."""
+    changes = {j: replace(getattr(ex, j), **{n: values[f"{n}_{j}"] for n in JOINT_PARAMS if f"{n}_{j}" in values})
+               for j in JOINTS}
+    return replace(ex, **changes), float(values.get("payload", 0.0))
+
+
+def measured_pistons(rec, ex: exc.Excavator) -> np.ndarray:
+    """Each piston's position [m] from the recorded angles (samples x joints)."""
+    d = rec.data if hasattr(rec, "data") else rec
+    q = np.column_stack([d[f"angle_{j}"].to_numpy(float) for j in JOINTS])
+    return exc.pistons_from_angles(q, ex)
+
+
+def _held(t: np.ndarray, values: np.ndarray):
+    """``f(time) -> row``: ``values`` held from each sample's time ``t`` (from 0)."""
+    def at(time: float):
+        k = int(np.searchsorted(t, time + 1e-9, side="right")) - 1
+        return values[min(max(k, 0), len(t) - 1)]
+    return at
+
+
+def simulate_machine(rec, ex: exc.Excavator, payload: float = 0.0, h: float = H) -> pd.DataFrame:
+    """The machine ``ex`` with ``payload`` on the recording (see the module's
+    docstring): ``t`` and per joint ``x_<j>`` [m], ``p_a_<j>``, ``p_b_<j>`` [Pa gauge]
+    on the recording's samples."""
+    from ..model.excavator_reference import ExcavatorMachine, simulate_excavator_reference
+    d = rec.data if hasattr(rec, "data") else rec
+    P_atm = float(getattr(rec, "P_atm", ex.P_atm))
+    t = d["t"].to_numpy(float)
+    t = t - t[0]
+    fs = 1.0 / float(np.median(np.diff(t)))
+    n0 = max(1, int(START_WINDOW * fs))
+    x0 = np.clip(measured_pistons(d.iloc[:n0], ex).mean(axis=0), 0.0, ex.strokes)
+    p_a0 = np.array([d[f"p_a_{j}"].iloc[:n0].mean() for j in JOINTS]) + P_atm
+    p_b0 = np.array([d[f"p_b_{j}"].iloc[:n0].mean() for j in JOINTS]) + P_atm
+    u = _held(t, d[[f"u_{j}" for j in JOINTS]].to_numpy(float))
+    keys = [f"u_{j}" for j in JOINTS]
+    command = lambda time: dict(zip(keys, u(time)))
+    f_tip = None
+    if all(f"f_tip_{c}" in d for c in "xyz"):
+        forces = d[[f"f_tip_{c}" for c in "xyz"]].to_numpy(float)
+        if np.any(forces):
+            held = _held(t, forces)
+            f_tip = lambda time: tuple(float(f) for f in held(time))
+    sample = h * max(1, round(1e-3 / h))
+    machine = ExcavatorMachine(ex=replace(ex, P_atm=P_atm), payload=payload, x0=tuple(x0), p_a0=tuple(p_a0),
+                               p_b0=tuple(p_b0))
+    sim = simulate_excavator_reference(command, float(t[-1]), machine, h=h, sample=sample, f_tip=f_tip)
+    ts = sim["time"].to_numpy()
+    out = {"t": d["t"].to_numpy(float)}
+    for j in JOINTS:
+        out[f"x_{j}"] = np.interp(t, ts, sim[f"x_{j}"].to_numpy())
+        for q in ("p_a", "p_b"):
+            out[f"{q}_{j}"] = np.interp(t, ts, sim[f"{q}_{j}"].to_numpy()) - P_atm
+    return pd.DataFrame(out)
+
+
+def excavator_nrmse(sim: pd.DataFrame, rec, ex: exc.Excavator) -> dict[str, dict[str, float]]:
+    """Per joint, the NRMSE of x (from the recorded angle), p_a and p_b: RMS error over
+    the channel's range in the recording (at least ``X_SPAN_MIN``, ``P_SPAN_MIN``)."""
+    d = rec.data if hasattr(rec, "data") else rec
+    x = measured_pistons(d, ex)
+    out = {}
+    for i, j in enumerate(JOINTS):
+        row = {}
+        for c, measured, floor in (("x", x[:, i], X_SPAN_MIN), ("p_a", d[f"p_a_{j}"].to_numpy(float), P_SPAN_MIN),
+                                   ("p_b", d[f"p_b_{j}"].to_numpy(float), P_SPAN_MIN)):
+            err = np.asarray(sim[f"{c}_{j}"], float) - measured
+            row[c] = float(np.sqrt(np.mean(err ** 2)) / max(float(np.ptp(measured)), floor))
+        out[j] = row
+    return out
+
+
+def plot_machine(sim: pd.DataFrame, rec, ex: exc.Excavator, path, title: str = "") -> None:
+    """Recorded and simulated x, p_a, p_b of every joint (a row per joint)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    d = rec.data
+    t = d["t"].to_numpy(float)
+    x = measured_pistons(d, ex)
+    fig, axes = plt.subplots(len(JOINTS), 3, sharex=True, figsize=(12, 9))
+    for i, j in enumerate(JOINTS):
+        axes[i, 0].plot(t, 1e3 * x[:, i], lw=0.8, label="recorded")
+        axes[i, 0].plot(t, 1e3 * sim[f"x_{j}"], lw=1.0, label="model, identified parameters")
+        axes[i, 0].set_ylabel(f"{j}\nx [mm]")
+        for k, q in ((1, "p_a"), (2, "p_b")):
+            axes[i, k].plot(t, d[f"{q}_{j}"] / 1e5, lw=0.8)
+            axes[i, k].plot(t, sim[f"{q}_{j}"] / 1e5, lw=1.0)
+            axes[i, k].set_ylabel(f"{q} [bar gauge]")
+    for k in range(3):
+        axes[-1, k].set_xlabel("t [s]")
+    axes[0, 0].legend(loc="best", fontsize=8)
+    fig.suptitle(title or f"{Path(rec.path).name}: recorded and simulated response")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100, format="png")
+    plt.close(fig)
+
+
+def parameter_table(result: FitResult, bound: dict[str, float]) -> dict:
+    """``params.json``'s ``params``: name -> value, ci95 (``null`` ends where there is
+    none), unit, joint, identified, cannot_tell, ssp_name, ssv_value."""
+    why = cannot_tell(result)
+    finite = lambda z: float(z) if math.isfinite(z) else None
+    return {k: {"value": finite(e.value), "ci95": [finite(e.ci95[0]), finite(e.ci95[1])], "unit": e.unit,
+                "joint": param_joint(k), "identified": why[k] is None, "cannot_tell": why[k],
+                "ssp_name": ssp_name(k), "ssv_value": bound.get(k)}
+            for k, e in result.params.items()}
+
+
+def write_excavator_outputs(result: FitResult, recs, out, holdout=(), ex: exc.Excavator | None = None,
+                            progress=None) -> dict:
+    """Write ``out`` (params.json), ``params.ssv`` and ``params.png`` beside it as one
+    set (a file this run does not write is removed); ``holdout``: recordings (paths)
+    not fitted on, each joint's NRMSE reported on them.  Returns the JSON document;
+    ``doc["written"]`` lists the files."""
+    say = progress or (lambda text: None)
+    out = Path(out)
+    ex = machine_for(recs[0], ex)
+    holds = read_excavator_recordings(holdout, "holdout")
+    for h in holds:
+        check_distinct(recs, h)
+    check_same_rig([*recs, *holds])
+    bound, notes = ssv_values(result, ex)
+    warnings = [*result.warnings, *notes]
+    machine, payload = bound_machine(bound, ex)
+    doc = {"kind": "excavator",
+           "method": result.method,
+           "recordings": [str(r.path) for r in recs],
+           "holdout": [str(h.path) for h in holds],
+           "params": parameter_table(result, bound),
+           "ssp_component": SSP_COMPONENT,
+           "warnings": warnings,
+           "details": plain(result.details)}
+    sims = {}
+    for r in recs:
+        say(f"simulating the identified machine on {r.path}")
+        sims[str(r.path)] = simulate_machine(r, machine, payload)
+    doc["nrmse_fit"] = {p: excavator_nrmse(s, r, machine) for (p, s), r in zip(sims.items(), recs)}
+    doc["nrmse_holdout"] = {}
+    for h in holds:
+        say(f"simulating the identified machine on the holdout {h.path}")
+        doc["nrmse_holdout"][str(h.path)] = excavator_nrmse(simulate_machine(h, machine, payload), h, machine)
+    names = (out.name, out.with_suffix(".ssv").name, out.with_suffix(".png").name)
+    with OutputSet(out.parent, stale=names) as files:
+        if bound:
+            write_ssv(files.path(names[1]), "identified",
+                      {ssp_name(k): (v, UNITS[k.rsplit("_", 1)[0] if k != "payload" else k]) for k, v in bound.items()},
+                      f"the whole excavator identified by boomfmi ({result.method}) from "
+                      + ", ".join(str(r.path) for r in recs))
+        plot_machine(sims[str(recs[0].path)], recs[0], machine, files.path(names[2]))
+        doc["written"] = [str(p) for p in [out, *files.written()]]
+        files.path(names[0]).write_text(json.dumps(plain(doc), indent=2))
+    return doc
+
+
+def summary_lines(doc: dict) -> list[str]:
+    """The human summary ``boomfmi identify`` prints: each joint's parameters with their
+    95 % intervals ("cannot tell" and why where the data cannot), the payload, the
+    warnings and each holdout's NRMSE per joint."""
+    lines = [f"{doc['method']}, per joint (95 % intervals):"]
+    params = doc["params"]
+
+    def one(name: str) -> str:
+        p = params[name]
+        short = name if p["joint"] is None else name.rsplit("_", 1)[0]
+        lo, hi = p["ci95"]
+        text = f"{short} = {p['value']:.4g} {p['unit']}" if p["value"] is not None else f"{short} = ?"
+        text += f" [{lo:.4g}, {hi:.4g}]" if lo is not None and hi is not None else " [no interval]"
+        return text + (f" (cannot tell: {p['cannot_tell']})" if p["cannot_tell"] else "")
+
+    for j in JOINTS:
+        entries = [one(f"{n}_{j}") for n in JOINT_PARAMS]
+        lines.append(f"  {j:7s}" + entries[0])
+        lines.extend(f"  {'':7s}" + e for e in entries[1:])
+    lines.append("  " + one("payload"))
+    lines.extend(f"warning: {w}" for w in doc["warnings"])
+    for path, per in doc.get("nrmse_holdout", {}).items():
+        lines.append(f"holdout {path}: NRMSE x / p_a / p_b per joint: " + "; ".join(
+            f"{j} {100 * e['x']:.2f} / {100 * e['p_a']:.2f} / {100 * e['p_b']:.2f} %" for j, e in per.items()))
+    return lines
+
+
+__all__ = ["identify_excavator_recordings", "write_excavator_outputs", "simulate_machine", "excavator_nrmse",
+           "ssv_values", "cannot_tell", "summary_lines", "SSP_COMPONENT"]
