@@ -12,6 +12,13 @@ from boomfmi.experiments import random_steps
 from boomfmi.recording import read_recording, write_recording
 from boomfmi.rig.offline import run_offline
 
+def strict_json(text: str):
+    """The file's JSON as a strict reader takes it: NaN and Infinity are not JSON."""
+    def refuse(name):
+        raise ValueError(f"not JSON: {name}")
+    return json.loads(text, parse_constant=refuse)
+
+
 
 @pytest.fixture(scope="module")
 def leaky(tmp_path_factory):
@@ -32,7 +39,7 @@ def test_a_leaking_piston_is_found_and_the_report_follows_the_spec(leaky, ssp_pa
     out = leaky / "out"
     proc = run(leaky / "fit.csv", "--holdout", leaky / "hold.csv", "--out", out, "--ssp", ssp_path, cwd=leaky)
     assert proc.returncode == 0, proc.stderr
-    doc = json.loads((out / "diagnosis.json").read_text())
+    doc = strict_json((out / "diagnosis.json").read_text())
     assert set(doc["baseline"]["params"]) == {"K_v", "F_s", "F_d", "F_L", "M"}
     assert set(doc["baseline"]["nrmse_holdout"]) == {"p_a", "p_b", "x"}
     assert doc["verdict"] == ["piston_leakage"]

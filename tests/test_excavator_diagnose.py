@@ -42,7 +42,7 @@ def test_effect_free_recording_gives_no_finding():
 
 
 def test_a_sensor_rail_is_no_gap_and_noise_is_no_rail():
-    from boomfmi.diagnose.excavator import as_sensed
+    from boomfmi.compare import as_sensed
     rng = np.random.default_rng(0)
     model = np.linspace(-2e3, 5e4, 1000)
     measured = np.maximum(model, 0.0)                    # a gauge sensor's floor at 0 Pa

@@ -19,6 +19,13 @@ from boomfmi.recording import RecordingError, read_recording, write_recording
 from boomfmi.rig.offline import run_offline
 from boomfmi.system.ssv import read_ssv
 
+def strict_json(text: str):
+    """The file's JSON as a strict reader takes it: NaN and Infinity are not JSON."""
+    def refuse(name):
+        raise ValueError(f"not JSON: {name}")
+    return json.loads(text, parse_constant=refuse)
+
+
 
 def test_the_papers_eq_17_does_not_give_its_reported_values():
     """Solving Eq. 17 as printed gives K_v = 321, F_d = 468, M = -320 (a negative mass),
@@ -76,7 +83,7 @@ def test_identify_command_writes_json_ssv_and_plot_and_simulate_takes_the_ssv(re
     d, truth = recordings
     out = tmp_path / "params.json"
     assert main(["identify", str(d / "fit.csv"), "--holdout", str(d / "hold.csv"), "--out", str(out)]) == 0
-    doc = json.loads(out.read_text())
+    doc = strict_json(out.read_text())
     assert doc["method"] == "fit" and doc["params"]["M"]["unit"] == "kg"
     assert doc["nrmse_holdout"][str(d / "hold.csv")]["x"] < 0.02
     assert out.with_suffix(".png").stat().st_size > 10_000
@@ -182,3 +189,12 @@ def test_the_spread_of_the_starts_is_robust_to_a_stray_one():
     assert start_spread([98.0, 100.0, 102.0, 100.0, 250.0]) == pytest.approx(1.4826 * 2.0)
     # four starts that disagree (a hybrid-rig recording with a 12-bit angle sensor)
     assert start_spread([122.9, 247.7, 104.5, 81.8]) == pytest.approx(1.4826 * 20.55, rel=1e-3)
+
+
+def test_results_are_written_as_json_any_reader_takes():
+    """An interval nobody could give is null, not NaN (which strict JSON readers refuse)."""
+    from boomfmi._json import dumps, plain
+    doc = {"F_s": {"value": np.float64(97.0), "ci95": (np.nan, float("inf"))}, "n": np.int64(3),
+           "ok": np.bool_(True), "x": np.array([1.0, np.nan])}
+    assert plain(doc) == {"F_s": {"value": 97.0, "ci95": [None, None]}, "n": 3, "ok": True, "x": [1.0, None]}
+    assert strict_json(dumps(doc))["F_s"]["ci95"] == [None, None]

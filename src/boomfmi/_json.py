@@ -1,15 +1,28 @@
-"""Turn results holding NumPy scalars into what ``json.dumps`` writes."""
+"""Turn results holding NumPy scalars into what ``json.dumps`` writes as JSON."""
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
 
 def plain(obj):
-    """``obj`` with NumPy scalars as Python numbers and tuples as lists, recursively."""
+    """``obj`` with NumPy scalars as Python numbers, tuples and arrays as lists, and a
+    number that is not finite (an interval nobody could give) as ``None``, recursively:
+    what any JSON reader takes (JSON has no NaN or Infinity; Python's ``json`` would
+    write them, and strict readers refuse the file)."""
     if isinstance(obj, dict):
         return {str(k): plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
+    if isinstance(obj, (list, tuple, np.ndarray)):
         return [plain(v) for v in obj]
-    if isinstance(obj, (np.floating, np.integer)):
-        return obj.item()
+    if isinstance(obj, (np.floating, np.integer, np.bool_)):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
     return obj
+
+
+def dumps(obj, **kwargs) -> str:
+    """``json.dumps`` of :func:`plain` ``(obj)``, refusing anything that is still not JSON."""
+    import json
+    return json.dumps(plain(obj), allow_nan=False, **kwargs)

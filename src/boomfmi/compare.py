@@ -22,6 +22,8 @@ from .recording import Recording
 #: The channels on which model and recording are compared: chamber pressures (gauge)
 #: and the piston position from the angle (Eq. 12).
 CHANNELS = ("p_a", "p_b", "x")
+#: the channels measured by pressure transducers (compared as sensed: :func:`as_sensed`)
+PRESSURES = ("p_a", "p_b")
 
 
 def rig_model(rec: Recording) -> Model:
@@ -113,15 +115,40 @@ def recorded(rec: Recording, rig: Model | None = None) -> dict:
             "p_a": rec.data["p_a"].to_numpy(float), "p_b": rec.data["p_b"].to_numpy(float)}
 
 
+#: the least share of a recording's samples at exactly its extreme value for that value
+#: to count as the sensor's rail (noise alone does not repeat an extreme value)
+RAIL_SHARE = 0.002
+
+
+def as_sensed(measured, simulated):
+    """``simulated`` as the sensor that recorded ``measured`` would read it: clipped at
+    that sensor's rails, each extreme of ``measured`` that repeats on at least
+    ``RAIL_SHARE`` of the samples (and 5).  A gauge transducer over 0 .. 10 bar reads
+    0 while a closed chamber that expands falls below the atmosphere: without this, the
+    model would be blamed for the sensor's floor.  Used on the pressures only (a
+    position repeats its extremes at the end stops, which the model must meet itself)."""
+    m = np.asarray(measured, float)
+    n_min = max(5, int(RAIL_SHARE * m.size))
+    lo, hi = float(np.min(m)), float(np.max(m))
+    out = np.asarray(simulated, float)
+    if np.count_nonzero(m == lo) >= n_min:
+        out = np.maximum(out, lo)
+    if np.count_nonzero(m == hi) >= n_min:
+        out = np.minimum(out, hi)
+    return out
+
+
 def nrmse(sim, rec: Recording, rig: Model | None = None, against=None) -> dict:
     """NRMSE of x, p_a, p_b: RMS error over the recording's range.  ``sim`` maps each
     channel to values on the recording's samples (gauge pressures); ``against``, so
-    mapped too, in place of the recording (two models compared on its scale)."""
+    mapped too, in place of the recording (two models compared on its scale).
+    Pressures are compared as their sensors read them (:func:`as_sensed`)."""
     out = {}
     for name, measured in recorded(rec, rig).items():
         span = float(np.ptp(measured)) or 1.0
-        ref = measured if against is None else np.asarray(against[name], float)
-        out[name] = float(np.sqrt(np.mean((np.asarray(sim[name], float) - ref) ** 2)) / span)
+        sensed = (lambda v: as_sensed(measured, v)) if name in PRESSURES else (lambda v: np.asarray(v, float))
+        ref = measured if against is None else sensed(against[name])
+        out[name] = float(np.sqrt(np.mean((sensed(sim[name]) - ref) ** 2)) / span)
     return out
 
 

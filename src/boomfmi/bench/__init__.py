@@ -7,10 +7,9 @@
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-from .._json import plain
+from .._json import dumps, plain
 from ..outputs import OutputSet
 from .friction import bench_friction
 from .leak import bench_leak, parse_pressure
@@ -47,7 +46,7 @@ def run_friction(fit_paths, hold_paths, area: float, opts: dict, out, split: boo
         pngs = friction_plots(doc, files.path)
         doc.pop("_data")
         doc = plain(doc)
-        files.path("friction.json").write_text(json.dumps(doc, indent=2))
+        files.path("friction.json").write_text(dumps(doc, indent=2))
         friction_html(doc, pngs, files.path("friction.html"))
     return doc
 
@@ -60,5 +59,5 @@ def run_leak(paths, volume: float, opts: dict, out, p_start: float | None = None
     with OutputSet(Path(out)) as files:
         leak_plot(doc, curves, files.path("leak.png"))
         doc = plain(doc)
-        files.path("leak.json").write_text(json.dumps(doc, indent=2))
+        files.path("leak.json").write_text(dumps(doc, indent=2))
     return doc

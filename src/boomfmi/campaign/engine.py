@@ -34,7 +34,7 @@ from collections import deque
 from datetime import datetime, timezone
 from pathlib import Path
 
-from .._json import plain
+from .._json import dumps
 from ..outputs import OutputSet
 from .case import CASE_VERSION, case_spec, run_case
 from .manifest import Manifest, read_manifest, slug
@@ -131,7 +131,7 @@ def write_case(folder: Path, case, result: dict) -> dict:
     with OutputSet(folder, stale=old) as files:
         for name, data in result.get("outputs", {}).items():
             files.path(name).write_bytes(data)
-        files.path("case.json").write_text(json.dumps(plain(record), indent=1))
+        files.path("case.json").write_text(dumps(record, indent=1))
     return record
 
 

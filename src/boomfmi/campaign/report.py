@@ -11,10 +11,9 @@ to its report.
 from __future__ import annotations
 
 import html
-import json
 from pathlib import Path
 
-from .._json import plain
+from .._json import dumps
 from ..outputs import OutputSet
 from .manifest import slug
 from .trend import LOAD, machine_trends
@@ -54,7 +53,7 @@ def write_campaign(out: Path, manifest, records: list[dict], run: dict) -> dict:
         for m, info in machines.items():
             _plot(files.path(info["plot"]), m, info["trends"])
         files.path("campaign.html").write_text(_html(doc, plots))
-        files.path("campaign.json").write_text(json.dumps(plain(doc), indent=1))
+        files.path("campaign.json").write_text(dumps(doc, indent=1))
     return doc
 
 

@@ -39,6 +39,7 @@ from ..model import EFFECTS, Boom, Model
 from ..physics import excavator as exc
 from .attribute import ABS_FLOOR, MIN_SHRINK, NOISE_FACTOR
 from .localise import simulate_pneumatics
+from ..compare import as_sensed
 
 #: the catalogue's effects that act inside one joint's pneumatics (the cut's stages)
 PNEUMATIC_STAGES = ("command", "port", "seal")
@@ -91,28 +92,6 @@ P_SPAN_MIN = 5e4
 
 def _span(m) -> float:
     return max(float(np.ptp(m)), P_SPAN_MIN)
-
-
-#: the least share of a recording's samples at exactly its extreme value for that value
-#: to count as the sensor's rail (noise alone does not repeat an extreme value)
-RAIL_SHARE = 0.002
-
-
-def as_sensed(measured, simulated):
-    """``simulated`` as the sensor that recorded ``measured`` would read it: clipped at
-    that sensor's rails, each extreme of ``measured`` that repeats on at least
-    ``RAIL_SHARE`` of the samples (and 5).  A gauge transducer over 0 .. 10 bar reads
-    0 while a closed chamber that expands falls below the atmosphere: without this, the
-    cut would call the sensor's floor a gap of the model."""
-    m = np.asarray(measured, float)
-    n_min = max(5, int(RAIL_SHARE * m.size))
-    lo, hi = float(np.min(m)), float(np.max(m))
-    out = np.asarray(simulated, float)
-    if np.count_nonzero(m == lo) >= n_min:
-        out = np.maximum(out, lo)
-    if np.count_nonzero(m == hi) >= n_min:
-        out = np.minimum(out, hi)
-    return out
 
 
 def _gap(cut, pa, pb) -> float:

@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._json import plain
+from .._json import dumps, plain
 from ..identify.excavator_outputs import (bound_machine, cannot_tell, check_same_rig, excavator_nrmse,
                                           identify_recs, machine_for, measured_pistons, read_excavator_recordings,
                                           simulate_machine, ssv_values)
@@ -149,7 +149,7 @@ def diagnose_excavator_recordings(fit_paths, hold_paths, out_dir, progress=None)
     doc = plain(doc)
     with OutputSet(Path(out_dir), stale=OUTPUTS) as files:
         files.path("report.html").write_text(_html(doc, figures))
-        files.path("diagnosis.json").write_text(json.dumps(doc, indent=2))
+        files.path("diagnosis.json").write_text(dumps(doc, indent=2))
     return doc
 
 

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..compare import CHANNELS
+from ..compare import CHANNELS, PRESSURES, as_sensed
 from ..identify.fit import breakaways, simulate_load
 from ..identify.preprocess import Prepared
 from ..model import Boom, Model
@@ -110,7 +110,10 @@ def localise(p: Prepared, model_sim, model: Model, lag_max: float = 0.02) -> Loc
     L = model.cylinder.L
     measured = {"x": p.x_raw, "p_a": p.p_a_raw, "p_b": p.p_b_raw}
     span = {c: max(float(np.ptp(measured[c])), 1e-9) for c in CHANNELS}
-    whole = {c: (np.asarray(model_sim[c], float) - measured[c]) / span[c] for c in CHANNELS}
+    # the pressures as their sensors would read them (compare.as_sensed: a rail is no gap)
+    model_sim = {c: as_sensed(measured[c], model_sim[c]) if c in PRESSURES else np.asarray(model_sim[c], float)
+                 for c in CHANNELS}
+    whole = {c: (model_sim[c] - measured[c]) / span[c] for c in CHANNELS}
     nrmse = {c: float(np.sqrt(np.mean(whole[c] ** 2))) for c in CHANNELS}
 
     # parts of the model with measured signals in place of model signals
@@ -118,8 +121,8 @@ def localise(p: Prepared, model_sim, model: Model, lag_max: float = 0.02) -> Loc
                            float(np.clip(p.x_raw[0], 0, L)))
     pa_pn, pb_pn = simulate_pneumatics(p, Boom(model))
     part = {"x": (x_mech - measured["x"]) / span["x"],
-            "p_a": (pa_pn - measured["p_a"]) / span["p_a"],
-            "p_b": (pb_pn - measured["p_b"]) / span["p_b"]}
+            "p_a": (as_sensed(measured["p_a"], pa_pn) - measured["p_a"]) / span["p_a"],
+            "p_b": (as_sensed(measured["p_b"], pb_pn) - measured["p_b"]) / span["p_b"]}
     # a lag of the model that removes most of its residual points at the sensors
     n_lag = int(lag_max * p.fs)
     best_gain, lag = 0.0, 0

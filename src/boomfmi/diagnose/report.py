@@ -17,7 +17,7 @@ import numpy as np
 
 from concurrent.futures import ProcessPoolExecutor
 
-from .._json import plain
+from .._json import dumps, plain
 from ..compare import CHANNELS, model_for, nrmse, recorded, rig_model, shrink, simulate_recording
 from ..identify import identify_recordings
 from ..identify.preprocess import prepare
@@ -129,7 +129,7 @@ def _write(out: Path, doc: dict, hold, base_sim, after_sim, loc=None) -> None:
         if hold is not None:
             images = _plots(files, hold, base_sim, after_sim, loc, doc)
         files.path("report.html").write_text(_html(doc, images))
-        files.path("diagnosis.json").write_text(json.dumps(plain(doc), indent=2))
+        files.path("diagnosis.json").write_text(dumps(doc, indent=2))
 
 
 def _plots(files: OutputSet, hold, base_sim, after_sim, loc, doc) -> list[str]:

@@ -11,7 +11,7 @@ import json
 import math
 from pathlib import Path
 
-from .._json import plain
+from .._json import dumps, plain
 from ..compare import nrmse, recorded, rig_model, simulate_recording
 from ..outputs import OutputSet
 from ..recording import check_distinct, check_plausible, read_recording
@@ -159,7 +159,7 @@ def write_outputs(result: FitResult, recs, out, holdout=()) -> dict:
         if physical and _usable(finite):
             plot_fit(finite, recs[0], files.path(names[2]))
         doc["written"] = [str(p) for p in [out, *files.written()]]
-        files.path(names[0]).write_text(json.dumps(doc, indent=2))
+        files.path(names[0]).write_text(dumps(doc, indent=2))
     return doc
 
 

@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .._json import plain
+from .._json import dumps, plain
 from ..outputs import OutputSet
 from ..physics import excavator as exc
 from ..recording import Recording, check_distinct, check_plausible, read_recording
@@ -350,7 +350,7 @@ def write_excavator_outputs(result: FitResult, recs, out, holdout=(), ex: exc.Ex
                       + ", ".join(str(r.path) for r in recs))
         plot_machine(sims[str(recs[0].path)], recs[0], machine, files.path(names[2]))
         doc["written"] = [str(p) for p in [out, *files.written()]]
-        files.path(names[0]).write_text(json.dumps(plain(doc), indent=2))
+        files.path(names[0]).write_text(dumps(doc, indent=2))
     return doc
 
 
