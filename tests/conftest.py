@@ -1,6 +1,9 @@
-"""Shared fixtures: the built FMUs (built once per session if build/fmus lacks them)."""
+"""Shared fixtures: the built FMUs (built once per session if build/fmus lacks them;
+under pytest-xdist the workers take turns on a lock, so only the first one builds)."""
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import os
 import subprocess
 import sys
@@ -20,6 +23,19 @@ def _sources_newer_than(fmu: Path) -> bool:
     return any(s.stat().st_mtime > stamp for s in sources)
 
 
+@contextlib.contextmanager
+def _build_lock():
+    """One test process at a time builds into build/ (pytest-xdist runs several)."""
+    lock = ROOT / "build" / ".test-build.lock"
+    lock.parent.mkdir(exist_ok=True)
+    with open(lock, "w") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
 @pytest.fixture(scope="session")
 def fmu_dir() -> Path:
     """Folder holding the built FMUs: $BOOMFMI_FMU_DIR, else build/fmus (rebuilt when stale)."""
@@ -28,9 +44,11 @@ def fmu_dir() -> Path:
     out = ROOT / "build" / "fmus"
     fmus = [out / f"{n}.fmu" for n in FMU_NAMES]
     ssp = out.parent / "excavator_boom.ssp"
-    if (not all(f.is_file() for f in fmus) or any(_sources_newer_than(f) for f in fmus)
-            or not ssp.is_file() or ROOT.joinpath("ssp", "SystemStructure.ssd").stat().st_mtime > ssp.stat().st_mtime):
-        subprocess.run([sys.executable, str(ROOT / "build_fmus.py")], check=True, cwd=ROOT)
+    with _build_lock():
+        if (not all(f.is_file() for f in fmus) or any(_sources_newer_than(f) for f in fmus)
+                or not ssp.is_file()
+                or ROOT.joinpath("ssp", "SystemStructure.ssd").stat().st_mtime > ssp.stat().st_mtime):
+            subprocess.run([sys.executable, str(ROOT / "build_fmus.py")], check=True, cwd=ROOT)
     return out
 
 
@@ -46,8 +64,9 @@ def fmu(fmu_dir):
 def ssp_path(fmu_dir) -> Path:
     """The packed boom system, build/excavator_boom.ssp (built with the FMUs)."""
     path = fmu_dir.parent / "excavator_boom.ssp"
-    if not path.is_file():
-        subprocess.run([sys.executable, str(ROOT / "build_fmus.py")], check=True, cwd=ROOT)
+    with _build_lock():
+        if not path.is_file():
+            subprocess.run([sys.executable, str(ROOT / "build_fmus.py")], check=True, cwd=ROOT)
     return path
 
 
