@@ -239,7 +239,7 @@ def test_a_live_excavator_sample_missing_a_joint_is_refused():
 
 
 # -- the page in headless Chromium --------------------------------------------------------------
-from test_view import CHROMIUM, CHROMEDRIVER, View, _free_port, _severe, _wait, driver  # noqa: E402,F401  (one browser set-up)
+from test_view import CHROMIUM, CHROMEDRIVER, View, _severe, _wait, driver, live_view, simulate_live  # noqa: E402,F401  (one browser set-up)
 
 browser = pytest.mark.skipif(not (CHROMIUM and CHROMEDRIVER),
                              reason="Debian's chromium and chromium-driver are not installed (./test.sh installs them as root)")
@@ -316,21 +316,10 @@ EXCAVATOR_SSP = ROOT / "build" / "excavator.ssp"
 @browser
 @pytest.mark.skipif(not EXCAVATOR_SSP.is_file(), reason="build/excavator.ssp is not built (build_fmus.py linkage)")
 def test_live_view_beside_a_running_excavator_cosimulation(driver, tmp_path):
-    import os
-    udp = _free_port()
-    key_file = tmp_path / "link.key"                 # the view checks with a key file, simulate signs from the env
-    key_file.write_bytes(KEY)
-    view = View("--live", f"udp://127.0.0.1:{udp}", "--key-file", str(key_file),
-                env={k: v for k, v in os.environ.items() if k != "BOOMFMI_LINK_KEY"})
+    view, udp = live_view(driver, tmp_path)
     try:
-        driver.get(view.url)
-        _wait(driver, "return window.boomView.connected && window.boomView.mode === 'live'")
         out = tmp_path / "live.csv"
-        sim = subprocess.run([sys.executable, "-m", "boomfmi.cli", "simulate", str(EXCAVATOR_SSP), "--experiment",
-                              "digging_cycle", "--stop", "1.0", "--view", f"udp://127.0.0.1:{udp}", "--out", str(out)],
-                             capture_output=True, text=True, timeout=120,
-                             env={**os.environ, "BOOMFMI_LINK_KEY": KEY.decode()})
-        assert sim.returncode == 0, sim.stderr
+        simulate_live(udp, EXCAVATOR_SSP, "--experiment", "digging_cycle", "--stop", "1.0", "--out", out)
         s = _wait(driver, "const s = window.boomView.state(); return window.boomView.framesReceived > 20 "
                           "&& s && s.kind === 'excavator' && s")
         assert driver.execute_script("return window.boomView.hello.scene.kind") == "excavator"

@@ -275,22 +275,34 @@ def test_the_page_reconnects_after_its_websocket_drops(contact_run, driver):
         view.stop()
 
 
-@browser
-def test_live_view_beside_a_running_teleoperation(contact_run, ssp_path, driver, tmp_path):
-    rec = contact_run.parent / "reference_rig.csv"
+def live_view(driver, tmp_path) -> tuple["View", int]:
+    """``boomfmi view --live`` on a free UDP port, checking with a key file, the page
+    connected to it: ``(view, udp_port)``."""
     udp = _free_port()
     key_file = tmp_path / "link.key"                 # the view checks with a key file, simulate signs from the env
     key_file.write_bytes(KEY)
     view = View("--live", f"udp://127.0.0.1:{udp}", "--key-file", str(key_file),
                 env={k: v for k, v in os.environ.items() if k != "BOOMFMI_LINK_KEY"})
+    driver.get(view.url)
+    _wait(driver, "return window.boomView.connected && window.boomView.mode === 'live'")
+    return view, udp
+
+
+def simulate_live(udp: int, *args) -> None:
+    """``boomfmi simulate ARGS --view udp://127.0.0.1:UDP``, signed from the environment's key."""
+    sim = subprocess.run([sys.executable, "-m", "boomfmi.cli", "simulate", *map(str, args),
+                          "--view", f"udp://127.0.0.1:{udp}"], capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "BOOMFMI_LINK_KEY": KEY.decode()})
+    assert sim.returncode == 0, sim.stderr
+
+
+@browser
+def test_live_view_beside_a_running_teleoperation(contact_run, ssp_path, driver, tmp_path):
+    rec = contact_run.parent / "reference_rig.csv"
+    view, udp = live_view(driver, tmp_path)
     try:
-        driver.get(view.url)
-        _wait(driver, "return window.boomView.connected && window.boomView.mode === 'live'")
-        sim = subprocess.run([sys.executable, "-m", "boomfmi.cli", "simulate", str(ssp_path.parent / "teleoperation.ssp"),
-                              "--experiment", str(rec), "--replay", "--view", f"udp://127.0.0.1:{udp}",
-                              "--out", str(tmp_path / "live.csv")], capture_output=True, text=True, timeout=120,
-                             env={**os.environ, "BOOMFMI_LINK_KEY": KEY.decode()})
-        assert sim.returncode == 0, sim.stderr
+        simulate_live(udp, ssp_path.parent / "teleoperation.ssp", "--experiment", rec, "--replay",
+                      "--out", tmp_path / "live.csv")
         s = _wait(driver, "return window.boomView.framesReceived > 20 && window.boomView.state()")
         assert s["ghostVisible"] and s["machineVisible"]
         out = np.genfromtxt(tmp_path / "live.csv", delimiter=",", names=True)
