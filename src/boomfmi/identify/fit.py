@@ -546,7 +546,11 @@ def _start_likelihood(moved: np.ndarray, readings: np.ndarray, reading: float, q
     one offset or another can excuse."""
     sigma = math.hypot(spread, q / 20.0, MODEL_SPREAD)
     if q <= 0.0:
-        return -np.sum((reading + moved - readings) ** 2, axis=1) / (2.0 * sigma ** 2)
+        # a simulated start that ran away (displacements beyond any float's square) is
+        # impossible, log-likelihood -inf, not an overflow warning
+        with np.errstate(over="ignore", invalid="ignore"):
+            ll = -np.sum((reading + moved - readings) ** 2, axis=1) / (2.0 * sigma ** 2)
+        return np.where(np.isnan(ll), -np.inf, ll)
     span = 1.0 if spread < q / 4.0 else 2.0
     lls = []
     for offset in np.linspace(-0.5, 0.5, 11) * q * span:
