@@ -236,7 +236,8 @@ def identify_excavator(recordings, ex: exc.Excavator = exc.Excavator(), cutoff: 
         cyl = ph.Cylinder(A_a=1.0, A_b=1.0, L=act.stroke, V_a0=act.V_a0, V_b0=act.V_b0)
         P_atm = ex.P_atm
         motions = [motion(_equivalent(r[i], payload), cyl, P_atm) for r in data]
-        M = float(np.median(np.concatenate([r[i].Mii0 + payload * r[i].dMii for r in data])))
+        # the joint's own mass where each start happens (it moves with the posture)
+        M = [r[i].Mii0 + payload * r[i].dMii for r in data]
         base = {"M": M, "K_v": est[f"K_v_{j}"].value, "F_d": est[f"F_d_{j}"].value, "F_L": 0.0}
         F_s, identified, info3 = static_friction(motions, base, cyl, P_atm)
         details["static_friction"][j] = dict(info3, identified=bool(identified))

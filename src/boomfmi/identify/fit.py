@@ -422,11 +422,15 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
     the Stribeck curve (at the measured speed), so each candidate F_s is simulated on
     its own.  With a seal-pressure law ``pressure`` (pressure_friction) both levels
     rise by ``base``'s coefficient times the seals' pressure, and F_s is the level at
-    none.  Returns ``(Estimate or None, identified, details)``."""
+    none.  ``base["M"]`` is the moving mass [kg], or one array per motion of the mass at
+    each sample (a linkage's joint, whose mass moves with its posture: each start then
+    runs with the mass where it starts).  Returns ``(Estimate or None, identified,
+    details)``."""
     M, K_v, F_d, F_L = (base[k] for k in ("M", "K_v", "F_d", "F_L"))
+    mass_at = (lambda ri, j: float(M[ri][j])) if isinstance(M, (list, tuple)) else (lambda ri, j: float(M))
     c = base.get(PRESSURE_COEFFICIENT[pressure], 0.0) if pressure is not None else 0.0
     events, lower = [], 0.0
-    for r in motions:
+    for ri, r in enumerate(motions):
         p = r.p
         # the static level the drive force needs at each sample, in the run's direction
         # (from the filtered pressures: the running maximum below would pick the
@@ -451,7 +455,8 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
             rest = p.x_raw[j:max(j + 1, i0 - int(0.01 * p.fs))]
             q = _quantum(p.x_raw[j:min(len(p.x_raw), ie + int(0.05 * p.fs))])
             events.append(dict(need=need, n=ie - j, r=r, j=j, ie=ie, d=d, t=float(p.t[i0]),
-                               reading=float(np.median(rest)), q=q, spread=float(np.std(rest))))
+                               reading=float(np.median(rest)), q=q, spread=float(np.std(rest)),
+                               M=mass_at(ri, j)))
     if not events:
         return None, False, {"starts": 0, "lower_bound_N": lower}
     hi_level = max(float(np.max(e["need"])) for e in events)
@@ -480,7 +485,7 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
             out = np.zeros((len(starts), n))
             for row, (s0, F) in enumerate(zip(starts, F_net)):
                 if s0 < n - 1:
-                    v = ph.sliding_velocity(0.0, F[s0:], K_v, M, dt)
+                    v = ph.sliding_velocity(0.0, F[s0:], K_v, e["M"], dt)
                     out[row, s0 + 1:] = np.cumsum(0.5 * (v[:-1] + v[1:])) * dt
             return out
         if v_s <= 0.0:
