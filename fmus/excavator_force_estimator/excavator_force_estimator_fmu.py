@@ -27,6 +27,7 @@ first.  A host reads ``f_det_*`` only together with ``determined_*``.
 """
 import math
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 
@@ -38,6 +39,10 @@ from boomfmi_excavator_force_estimator_lib.physics.excavator_force import (obser
 from boomfmi_excavator_force_estimator_lib.physics.validation import require_non_negative, require_positive
 
 _EX = Excavator()
+#: the measured inputs' names, per joint in the linkage's order
+_ANGLES = tuple(f"angle_{j}" for j in JOINTS)
+_P_A = tuple(f"p_a_{j}" for j in JOINTS)
+_P_B = tuple(f"p_b_{j}" for j in JOINTS)
 _AXES = "xyz"
 
 
@@ -93,11 +98,13 @@ class ExcavatorForceEstimator(BoomSlave):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self.modelName = "excavator_force_estimator"
+        self._reset()
+
+    def _reset(self):
+        """The outputs before the first step; the observer starts at the first measurement."""
         self._f = np.zeros(3)
         self._r = np.zeros(3)
         self._res = 0.0
-        self._n_info = 0
-        self._det = np.zeros(3, bool)
         self._f_det = np.zeros(3)
         self._state = None
 
@@ -111,36 +118,34 @@ class ExcavatorForceEstimator(BoomSlave):
         ex = replace(_EX, **acts, P_atm=self.P_atm)
         check_excavator(ex)
         self._ex = ex
-        self._omega = 2.0 * math.pi * self.f_motion
-        self._f = np.zeros(3)
-        self._r = np.zeros(3)
-        self._res = 0.0
-        self._n_info = 0
-        self._det = np.zeros(3, bool)
-        self._f_det = np.zeros(3)
-        self._state = None
+        self._observe = partial(observer_step, omega=2.0 * math.pi * self.f_motion, ex=ex, payload=self.payload,
+                                tau_est=self.tau_est, v_rest=self.v_rest, rest_weight=self.rest_weight,
+                                stop_weight=self.stop_weight, v_info=self.v_info, f_info=self.f_info)
+        self._reset()
 
     def step(self, t, dt):
-        q = [getattr(self, f"angle_{j}") for j in JOINTS]
-        p_a = np.array([getattr(self, f"p_a_{j}") for j in JOINTS]) + self.P_atm
-        p_b = np.array([getattr(self, f"p_b_{j}") for j in JOINTS]) + self.P_atm
+        q = [getattr(self, n) for n in _ANGLES]
+        p_a = np.array([getattr(self, n) for n in _P_A]) + self.P_atm
+        p_b = np.array([getattr(self, n) for n in _P_B]) + self.P_atm
         if self._state is None:             # the filters start at rest at the first measurement
             self._state = observer_start(q, p_a, p_b, self._ex)
-        self._state, self._f, self._res, _ = observer_step(self._state, q, p_a, p_b, dt, self._omega, self._ex,
-                                                           self.payload, self.tau_est, self.v_rest,
-                                                           self.rest_weight, self.stop_weight, self.v_info,
-                                                           self.f_info)
+        self._state, self._f, self._res, _ = self._observe(self._state, q, p_a, p_b, dt)
         self._r = reflected_force_3d(self._f, self._r, dt, self.gain, self.f_max, self.rate_max)
-        self._n_info = int(np.sum(self._state["informative"]))
-        self._det = np.array(self._state["determined"], bool)
-        self._f_det = np.where(self._det, self._state["f_known"], self._f_det)    # held where undetermined
+        known = self._state["f_known"]
+        self._f_det = np.where(np.isfinite(known), known, self._f_det)     # held where undetermined
 
 
+def _determined(self, i: int) -> bool:
+    """Whether the informative joints determine world component ``i`` (the physics'
+    ``f_known`` is nan where they cannot tell)."""
+    return self._state is not None and bool(np.isfinite(self._state["f_known"][i]))
+
+
+ExcavatorForceEstimator.residual = property(lambda self: float(self._res))
+ExcavatorForceEstimator.n_informative = property(
+    lambda self: 0 if self._state is None else int(np.sum(self._state["informative"])))
 for _i, _c in enumerate(_AXES):
     setattr(ExcavatorForceEstimator, f"f_est_{_c}", property(lambda self, i=_i: float(self._f[i])))
     setattr(ExcavatorForceEstimator, f"f_reflect_{_c}", property(lambda self, i=_i: float(self._r[i])))
-ExcavatorForceEstimator.residual = property(lambda self: float(self._res))
-ExcavatorForceEstimator.n_informative = property(lambda self: self._n_info)
-for _i, _c in enumerate(_AXES):
-    setattr(ExcavatorForceEstimator, f"determined_{_c}", property(lambda self, i=_i: bool(self._det[i])))
+    setattr(ExcavatorForceEstimator, f"determined_{_c}", property(lambda self, i=_i: _determined(self, i)))
     setattr(ExcavatorForceEstimator, f"f_det_{_c}", property(lambda self, i=_i: float(self._f_det[i])))

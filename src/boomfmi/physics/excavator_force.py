@@ -138,7 +138,7 @@ def observer_start(angles, p_a, p_b, ex: exc.Excavator = exc.Excavator()):
     x = exc.pistons_from_angles(np.asarray(angles, float), ex)
     F = exc.cylinder_forces(p_a, p_b, ex)
     return {"x_slow": x, "v_slow": np.zeros(4), "x": x, "v": np.zeros(4), "F": F, "dF": np.zeros(4), "f": np.zeros(3), "f_known": np.full(3, np.nan),
-            "informative": np.zeros(4, bool), "determined": np.zeros(3, bool)}
+            "informative": np.zeros(4, bool)}
 
 
 def observer_step(state: dict, angles, p_a, p_b, dt: float, omega: float, ex: exc.Excavator = exc.Excavator(),
@@ -154,8 +154,7 @@ def observer_step(state: dict, angles, p_a, p_b, dt: float, omega: float, ex: ex
     sliding by a slower filter of the angles, corner ``f_info`` [Hz], above ``v_info``
     [m/s]; their torques by the sliding law in that direction) as
     ``state["f_known"]``, ``nan`` where they do not determine a component
-    (:func:`tip_force_determined`), their mask as ``state["informative"]`` and the
-    determined components (bool per world axis) as ``state["determined"]``."""
+    (:func:`tip_force_determined`), and their mask as ``state["informative"]``."""
     xm = exc.pistons_from_angles(np.asarray(angles, float), ex)
     Fm = exc.cylinder_forces(p_a, p_b, ex)
     xs, vs, v_mean, a_mean = [], [], np.empty(4), np.empty(4)
@@ -186,10 +185,10 @@ def observer_step(state: dict, angles, p_a, p_b, dt: float, omega: float, ex: ex
     info = informative_joints(xm, v_both, ex, v_info) & informative_joints(x_mid, v_both, ex, v_info)
     tau_i, _, _ = observed_joint_torques(x_mid, v_mean, a_mean, F_mid, ex, payload, v_rest,
                                          sliding=np.where(info, np.sign(v_slow), 0.0))
-    f_det, known = tip_force_determined(q, tau_i, info, ex)
+    f_det, _ = tip_force_determined(q, tau_i, info, ex)
     new = {"x_slow": x_slow, "v_slow": v_slow, "x": np.asarray(xs), "v": np.asarray(vs), "F": F_new, "dF": dF_new, "f": f_est,
            "f_known": _low_pass_known(state.get("f_known", np.full(3, np.nan)), f_det, dt, tau_est),
-           "informative": info, "determined": known}
+           "informative": info}
     return new, f_est, residual, tau
 
 
@@ -202,7 +201,7 @@ def reflected_force_3d(f_est, f_prev, dt, gain, f_max, rate_max):
 
 def estimate_tip_force(data, ex: exc.Excavator = exc.Excavator(), payload: float = 0.0, f_motion: float = 30.0,
                        tau_est: float = 0.004, v_rest: float = 2e-3, rest_weight: float = 0.3, stop_weight: float = 0.02, P_atm=None,
-                       cannot_tell: bool = False, v_info: float = 1e-3):
+                       cannot_tell: bool = False, v_info: float = 1e-3, f_info: float = 3.0):
     """The observer run over an excavator recording (a DataFrame with its columns,
     pressures gauge): arrays ``f`` (n, 3) [N] and ``residual`` (n,) [N m].
 
@@ -222,7 +221,7 @@ def estimate_tip_force(data, ex: exc.Excavator = exc.Excavator(), payload: float
     n_info = np.zeros(len(t), int)
     for k in range(1, len(t)):
         state, f[k], res[k], _ = observer_step(state, Q[k], PA[k], PB[k], t[k] - t[k - 1], omega, ex, payload,
-                                               tau_est, v_rest, rest_weight, stop_weight, v_info)
+                                               tau_est, v_rest, rest_weight, stop_weight, v_info, f_info)
         f_known[k] = state["f_known"]
         n_info[k] = int(np.sum(state["informative"]))
     if cannot_tell:
