@@ -250,22 +250,17 @@ def run_excavator(cosim, experiment: str, stop_time: float | None = None, progre
     ``u_<j>``, ``p_a_<j>``, ``p_b_<j>`` (gauge [Pa]), ``angle_<j>``, then ``x_<j>``,
     ``v_<j>`` and the tip force ``f_tip_x``, ``f_tip_y``, ``f_tip_z`` the linkage was
     given (0 unless a parameter set drives it).  ``view`` streams the run to ``boomfmi
-    view --live`` as the excavator's samples: those of these columns the live view's
-    schema has (``view.live.BOUNDS``: the model's ``angle_<j>``, ``p_a_<j>``, ``p_b_<j>``
-    and ``f_tip_<a>``)."""
+    view --live`` as the excavator's samples (those of these columns a sample carries:
+    the model's ``angle_<j>``, ``p_a_<j>``, ``p_b_<j>`` and ``f_tip_<a>``)."""
     wiring = excavator_wiring(cosim)
     inputs, duration = excavator_inputs(experiment, {j: w[2] for j, w in wiring.items()})
     columns = excavator_columns(cosim, wiring)
-    live = {}
-    if view:
-        from .view.live import BOUNDS
-        live = {k: c for k, c in columns.items() if k in BOUNDS}
     result = simulate_with_view(cosim, stop_time if stop_time is not None else duration, inputs, progress,
-                                view, view_key, live)
+                                view, view_key, columns)
     out = {"t": result["time"]}
     for name, (col, offset) in columns.items():
         if col not in result and name.startswith("f_tip_"):      # the linkage's tip force, not recorded
             out[name] = 0.0
         else:
-            out[name] = result[col] + offset if offset else result[col]
+            out[name] = result[col] + offset
     return pd.DataFrame(out)

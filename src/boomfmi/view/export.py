@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..physics import excavator
-from .frames import TIP_FORCE_SCALE, ExcavatorRun, Run, load_run, scene
+from .frames import TIP_FORCE_SCALE, ExcavatorRun, Run, heading, load_run, scene
 
 MACHINE, GHOST, FORCE, TRUTH, STEEL, BASE = "#f0a030", "#5ab0ff", "#ff4d5e", "#9aa3b5", "#b8c0cc", "#59606c"
 FORCE_SCALE = 0.15 / 500          # m of arrow per N, as on the page
@@ -71,13 +71,18 @@ class _Figure:
         self.fig.text(0.015, 0.975, f"boomfmi virtual view: {run.path.name}   {legend}", color="#8a93a3", fontsize=9)
         self.plots = []
 
-    def _plot(self, cell, title: str, series) -> dict:
+    def _axes(self, cell, title: str):
+        """An axes of the figure in the page's style."""
         ax = self.fig.add_subplot(cell, facecolor="#1c2027")
         ax.set_title(title, color="#d9dee7", fontsize=9, pad=3)
         ax.tick_params(colors="#8a93a3", labelsize=7)
         for s in ax.spines.values():
             s.set_color("#3a414d")
         ax.grid(color="#2a3039", lw=0.6)
+        return ax
+
+    def _plot(self, cell, title: str, series) -> dict:
+        ax = self._axes(cell, title)
         lines = [(get, ax.plot([], [], color=c, ls=ls, lw=1.3)[0]) for get, c, ls in series]
         return {"ax": ax, "lines": lines, "t": [], "y": [[] for _ in lines]}
 
@@ -214,15 +219,10 @@ class ExcavatorDrawing(_Figure):
         self.views = []                          # (axes, the world axis drawn upwards: z side, y top)
         for cell, k, title, ylim in ((left[0, :], 2, "side (x-z) [m]", (-0.45, 0.75)),
                                      (left[1, 0], 1, "top (x-y) [m]", (-0.5, 0.5))):
-            ax = self.fig.add_subplot(cell, facecolor="#1c2027")
+            ax = self._axes(cell, title)
             ax.set_xlim(-0.2, 1.05)
             ax.set_ylim(*ylim)
             ax.set_aspect("equal", adjustable="box")
-            ax.set_title(title, color="#d9dee7", fontsize=9, pad=3)
-            ax.tick_params(colors="#8a93a3", labelsize=7)
-            for sp in ax.spines.values():
-                sp.set_color("#3a414d")
-            ax.grid(color="#2a3039", lw=0.6)
             self.views.append((ax, k))
         import matplotlib.patches as mpatches
         side, top = (ax for ax, _ in self.views)
@@ -314,9 +314,8 @@ class ExcavatorDrawing(_Figure):
         self._pose(self.ghost, f["model"])
         pts = f["machine"]["points"]
         tip = pts["tip"] if pts else None
-        heading = math.atan2(pts["boom_pivot"][1] - pts["swing_axis"][1],
-                             pts["boom_pivot"][0] - pts["swing_axis"][0]) if pts else 0.0
-        across = TIP_SIDE * np.array([-math.sin(heading), math.cos(heading), 0.0])
+        yaw = heading(pts) if pts else 0.0
+        across = TIP_SIDE * np.array([-math.sin(yaw), math.cos(yaw), 0.0])
         self._arrow(self.arrows["f_tip_est"], f["f_tip_est"], tip, across)
         self._arrow(self.arrows["f_tip"], f["f_tip"], tip, -across)
         deg = lambda p, j: "      -" if not p or p["angle"][j] is None else f"{math.degrees(p['angle'][j]):7.2f}"

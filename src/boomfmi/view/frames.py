@@ -203,15 +203,21 @@ TIP_FORCES = {"f_tip": "f_tip", "f_tip_est": "f_tip_est", "f_reflect": "f_reflec
 TIP_FORCE_SCALE = 0.25 / 50.0
 
 
+def heading(p: dict) -> float:
+    """The upper structure's heading [rad] from the points: swing axis to boom pivot,
+    seen from above."""
+    axis, boom = p["swing_axis"], p["boom_pivot"]
+    return math.atan2(boom[1] - axis[1], boom[0] - axis[0])
+
+
 def _angles_of_points(p: dict) -> np.ndarray:
     """The joint angles as the drawing shows them, from the points: the upper
     structure's heading (swing axis to boom pivot, seen from above), the boom's
     elevation (boom pivot to arm pivot) in the upper structure's vertical plane, and the
     arm's and bucket's elevations relative to the link before.  The page reads its drawn
     angles back the same way (``app.js``: ``excavatorAngles``)."""
-    axis, boom = np.asarray(p["swing_axis"], float), np.asarray(p["boom_pivot"], float)
-    heading = math.atan2(boom[1] - axis[1], boom[0] - axis[0])
-    e = np.array([math.cos(heading), math.sin(heading), 0.0])
+    h = heading(p)
+    e = np.array([math.cos(h), math.sin(h), 0.0])
 
     def elevation(a, b):
         d = np.asarray(p[b], float) - np.asarray(p[a], float)
@@ -219,7 +225,7 @@ def _angles_of_points(p: dict) -> np.ndarray:
     eb = elevation("boom_pivot", "arm_pivot")
     ea = elevation("arm_pivot", "bucket_pivot")
     ek = elevation("bucket_pivot", "tip")
-    return np.array([heading, eb, ea - eb, ek - ea])
+    return np.array([h, eb, ea - eb, ek - ea])
 
 
 def _wrap(a):

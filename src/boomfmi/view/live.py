@@ -246,7 +246,9 @@ class LiveSender:
         if not key:
             key = load_key()                 # $BOOMFMI_LINK_KEY, else LinkError
         self.address = parse_address(url)
-        self.columns, self.period = columns, 1.0 / rate
+        # only the fields a sample may carry (BOUNDS): the view refuses a sample with others
+        self.columns = {k: c for k, c in columns.items() if k in BOUNDS}
+        self.period = 1.0 / rate
         self.geom = None if geom is None else [float(v) for v in geom]
         self.key, self.session, self.seq = key, secrets.token_hex(8), 0
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
