@@ -1,6 +1,7 @@
 """Turn results holding NumPy scalars into what ``json.dumps`` writes as JSON."""
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -24,5 +25,4 @@ def plain(obj):
 
 def dumps(obj, **kwargs) -> str:
     """``json.dumps`` of :func:`plain` ``(obj)``, refusing anything that is still not JSON."""
-    import json
     return json.dumps(plain(obj), allow_nan=False, **kwargs)

@@ -34,12 +34,12 @@ from types import SimpleNamespace
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from ..compare import as_sensed
 from ..identify.preprocess import lowpass
 from ..model import EFFECTS, Boom, Model
 from ..physics import excavator as exc
 from .attribute import ABS_FLOOR, MIN_SHRINK, NOISE_FACTOR
 from .localise import simulate_pneumatics
-from ..compare import as_sensed
 
 #: the catalogue's effects that act inside one joint's pneumatics (the cut's stages)
 PNEUMATIC_STAGES = ("command", "port", "seal")

@@ -248,7 +248,7 @@ def identify_excavator(recordings, ex: exc.Excavator = exc.Excavator(), cutoff: 
             warnings.append(f"{j}: the starts put F_s_{j} anywhere in [{F_s.ci95[0]:.4g}, {F_s.ci95[1]:.4g}] N")
         est[f"F_s_{j}"] = F_s
     for k, e in est.items():
-        if not k.startswith("F_s") and not e.relative_halfwidth < 0.5 and k != "payload":
+        if not k.startswith("F_s") and not e.tells and k != "payload":
             warnings.append(f"the data cannot identify {k}: its 95 % interval "
                             f"[{e.ci95[0]:.4g}, {e.ci95[1]:.4g}] {e.unit} is wider than half its value")
     ordered = {f"{n}_{j}": est[f"{n}_{j}"] for j in JOINTS for n in JOINT_PARAMS}

@@ -155,7 +155,7 @@ def cannot_tell(result: FitResult) -> dict[str, str | None]:
                 reason = f"no start of motion from rest (F_d_{joint} is used)"
         elif name.startswith("F_s_") and not statics.get(joint, {}).get("identified", True):
             reason = "the starts put it anywhere in its interval"
-        elif name != "payload" and not name.startswith("F_s_") and not e.relative_halfwidth < 0.5:
+        elif name != "payload" and not name.startswith("F_s_") and not e.tells:
             reason = "its interval is wider than half its value"
         else:
             reason = None

@@ -58,6 +58,9 @@ UNITS = {"K_v": "N.s/m", "F_s": "N", "F_d": "N", "F_L": "N", "M": "kg", "A_max":
          "c_sum": "N/Pa", "c_max": "N/Pa", "c_diff": "N/Pa"}
 #: pressure_friction's coefficient for each seal-pressure law (``physics.effects.seal_pressure``)
 PRESSURE_COEFFICIENT = {"sum": "c_sum", "max": "c_max", "diff": "c_diff"}
+#: The widest 95 % interval, as a half-width relative to the value, with which the data
+#: still tell a parameter (wider: identification warns that they cannot).
+TELLS_WIDTH = 0.5
 #: Relative floor of every interval's half-width (see the module's docstring).
 SYSTEMATIC = {"K_v": 0.01, "F_s": 0.03, "F_d": 0.015, "F_L": 0.005, "M": 0.03}
 
@@ -71,6 +74,12 @@ class Estimate:
     @property
     def relative_halfwidth(self) -> float:
         return (self.ci95[1] - self.ci95[0]) / 2.0 / abs(self.value) if self.value else math.inf
+
+    @property
+    def tells(self) -> bool:
+        """Whether the interval is narrow enough for the data to tell the value
+        (:data:`TELLS_WIDTH`; a NaN interval does not)."""
+        return bool(self.relative_halfwidth < TELLS_WIDTH)
 
 
 @dataclass
@@ -688,7 +697,7 @@ def identify(preps: list[Prepared], cyl: ph.Cylinder = ph.Cylinder(), P_atm: flo
         else:
             est["A_max"] = a_max
     for k, e in est.items():
-        if k != "F_s" and not e.relative_halfwidth < 0.5:
+        if k != "F_s" and not e.tells:
             warnings.append(f"the data cannot identify {k}: its 95 % interval "
                             f"[{e.ci95[0]:.4g}, {e.ci95[1]:.4g}] {e.unit} is wider than half its value")
     ordered = {k: est[k] for k in (*PARAMS, "A_max", *PRESSURE_COEFFICIENT.values()) if k in est}
