@@ -45,6 +45,7 @@ import statistics
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
+from itertools import repeat
 from pathlib import Path
 
 import numpy as np
@@ -171,10 +172,15 @@ def _true_errors(with_it, without) -> float:
     return total
 
 
+def case_dir(case: dict, cache: Path) -> Path:
+    """The case's folder in ``cache``: its recordings and what was measured on them."""
+    return cache / f"case{case['case']:03d}_{case['seed']}"
+
+
 def make_recordings(case: dict, cache: Path) -> dict:
     """Simulate (or take from ``cache``) the case's fit and holdout recordings and
     measure, on each, how much each thing that is wrong changes its noise-free sensed signals."""
-    d = cache / f"case{case['case']:03d}_{case['seed']}"
+    d = case_dir(case, cache)
     meta = d / "meta.json"
     info = json.loads(meta.read_text()) if meta.exists() else {}
     if "difference_fit" in info and info.get("scoring") == SCORING and info.get("case") == case:
@@ -218,11 +224,6 @@ def truth_of(case: dict, info: dict, fit_too: bool = True) -> tuple[list, list]:
     if any(seen(n) for n in case["disturbances"]):
         out.append("unexplained")
     return full, out
-
-
-def _recordings(args) -> dict:
-    case, cache = args
-    return make_recordings(case, cache)
 
 
 def score_case(case: dict, info: dict, doc: dict, wall: float) -> dict:
@@ -271,11 +272,11 @@ def main(argv=None) -> int:
     cases = [draw_case(i, args.seed) for i in (args.only if args.only is not None else range(args.cases))]
     t0 = time.perf_counter()
     with ProcessPoolExecutor(args.workers) as pool:        # the independent simulator's recordings
-        infos = list(pool.map(_recordings, [(c, args.cache) for c in cases]))
+        infos = list(pool.map(make_recordings, cases, repeat(args.cache)))
     # the diagnoses through boomfmi campaign's path: a machine per case, on a Dask LocalCluster
-    folder = lambda c: args.cache / f"case{c['case']:03d}_{c['seed']}"
     manifest = write_manifest(args.cache / "campaign_manifest.csv", [
-        {"machine": f"case{c['case']:03d}", "date": "2000-01-01", "role": role, "recording": folder(c) / name}
+        {"machine": f"case{c['case']:03d}", "date": "2000-01-01", "role": role,
+         "recording": case_dir(c, args.cache) / name}
         for c in cases for role, name in (("fit", "fit.csv"), ("holdout", "hold.csv"))])
     campaign = args.cache / "campaign"
     if not args.resume:

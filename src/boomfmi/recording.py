@@ -84,21 +84,28 @@ def recording_kind(source) -> str:
     if isinstance(source, Recording):
         columns = list(source.data.columns)
     elif isinstance(source, (str, os.PathLike)):
-        path = Path(source)
-        if not path.is_file():
-            raise RecordingError(path, "no such file")
-        try:
-            with open(path, encoding="utf-8-sig", newline="") as f:
-                first = f.readline(1 << 16)
-        except UnicodeDecodeError as e:
-            raise RecordingError(path, f"not UTF-8 text ({e.reason} at byte {e.start})") from None
-        if not first.strip():
-            raise RecordingError(path, "empty file: no header row", row=1)
-        columns = [h.strip() for h in next(csv.reader([first]))]
+        columns = read_header(source)
     else:
         columns = [str(c).strip() for c in source]
     excavator = set(EXCAVATOR_REQUIRED) - {"t"}
     return "excavator" if any(c in excavator for c in columns) else "boom"
+
+
+def read_header(path) -> list[str]:
+    """The column names of the recording at ``path``, from its header row alone (the
+    rest is not read); :class:`RecordingError` where the file is missing, is not UTF-8
+    text or has no header row."""
+    path = Path(path)
+    if not path.is_file():
+        raise RecordingError(path, "no such file")
+    try:
+        with open(path, encoding="utf-8-sig", newline="") as f:
+            first = f.readline(1 << 16)
+    except UnicodeDecodeError as e:
+        raise RecordingError(path, f"not UTF-8 text ({e.reason} at byte {e.start})") from None
+    if not first.strip():
+        raise RecordingError(path, "empty file: no header row", row=1)
+    return [h.strip() for h in next(csv.reader([first]))]
 
 
 def common_kind(paths) -> str:
@@ -267,9 +274,18 @@ def parse_recording(path):
 
 
 def _read_sidecar(path: Path) -> dict:
+    """The sidecar of the recording at ``path`` (its ``NAME.json``), ``{}`` where it has none."""
     side = path.with_suffix(".json")
+    return read_sidecar(side) if side.is_file() else {}
+
+
+def read_sidecar(side) -> dict:
+    """Read and check the sidecar file ``side`` (recording-format.md: a JSON object of
+    :data:`SIDECAR_KEYS`, its ``rig`` values finite numbers of :data:`RIG_KEYS`); raise
+    :class:`RecordingError` naming it."""
+    side = Path(side)
     if not side.is_file():
-        return {}
+        raise RecordingError(side, "no such file")
     try:
         content = json.loads(side.read_text(encoding="utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as e:

@@ -12,10 +12,10 @@ the campaign goes on.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import html
 import json
-import math
 import os
 import socket
 import tempfile
@@ -24,17 +24,17 @@ import traceback
 from pathlib import Path
 
 from .. import __version__
+from .._json import plain
 
 #: bump when what a case computes changes: a campaign re-run then redoes its cases
 CASE_VERSION = 1
-LOAD = ("K_v", "F_s", "F_d", "F_L", "M")
 
 
 def case_spec(case, ssp=None) -> dict:
     """What a worker needs to run ``case`` (a :class:`~.manifest.Case`): its recordings'
     and sidecars' bytes, and the fingerprint that says whether a result on disk is of
-    this very input (the files' names, roles and bytes, boomfmi's version and
-    :data:`CASE_VERSION`)."""
+    this very input (the files' names, roles and bytes, ``ssp`` where given, boomfmi's
+    version and :data:`CASE_VERSION`)."""
     files, digest = [], hashlib.sha256(f"boomfmi-{__version__}-case-{CASE_VERSION}".encode())
     names: set[str] = set()
     for e in sorted(case.entries, key=lambda e: (e.role, e.line)):
@@ -51,6 +51,9 @@ def case_spec(case, ssp=None) -> dict:
         for part in (e.role.encode(), name.encode(), hashlib.sha256(csv_bytes).digest(),
                      hashlib.sha256(side or b"").digest()):
             digest.update(len(part).to_bytes(8, "little") + part)
+    if ssp:                  # the confirmation's system (none given: the default's, as before)
+        part = f"ssp={ssp}".encode()
+        digest.update(len(part).to_bytes(8, "little") + part)
     return {"machine": case.machine, "date": case.date, "files": files,
             "ssp": str(ssp) if ssp else None, "fingerprint": digest.hexdigest()}
 
@@ -120,15 +123,20 @@ def _restore(text: str, sources: dict, kind: str = "") -> str:
 def _identify_and_diagnose(fit, hold, out, ssp, log) -> dict:
     from ..diagnose import diagnose
     from ..identify import identify_recordings, write_outputs
-    doc = diagnose(fit, hold, out, workers=1, ssp=ssp, progress=log.append)
+
+    @functools.cache
+    def baseline():               # identified once, where the diagnosis judges the recordings
+        result, recs, _ = identify_recordings(fit, "fit")
+        return result, recs
+    doc = diagnose(fit, hold, out, workers=1, ssp=ssp, progress=log.append, baseline=baseline)
     summary = {"judgeable": doc["judgeable"], "verdict": doc["verdict"]}
     if not doc["judgeable"]:
         summary["reason"] = doc["reason"]
         return summary
-    result, recs, _ = identify_recordings(fit, "fit")
+    result, recs = baseline()
     write_outputs(result, recs, out / "params.json", holdout=hold)
-    summary["params"] = {k: {"value": _num(e.value), "ci95": [_num(e.ci95[0]), _num(e.ci95[1])], "unit": e.unit,
-                             "identified": identified(k, e, result.details)}
+    summary["params"] = {k: {"value": plain(float(e.value)), "ci95": plain([float(e.ci95[0]), float(e.ci95[1])]),
+                             "unit": e.unit, "identified": identified(k, e, result.details)}
                          for k, e in result.params.items()}
     before = doc["baseline"]["nrmse_holdout"]
     summary.update(nrmse_holdout=before, gap_threshold=doc["gap_threshold"],
@@ -151,9 +159,4 @@ def identified(name: str, estimate, details: dict) -> bool:
     of the others)."""
     if name == "F_s":
         return bool((details.get("static_friction") or {}).get("identified"))
-    return bool(estimate.relative_halfwidth < 0.5)
-
-
-def _num(v: float):
-    """A number for JSON: NaN (an interval identification could not give) as None."""
-    return float(v) if math.isfinite(v) else None
+    return estimate.tells

@@ -11,8 +11,9 @@
   ``OUT/cases/<machine>/<date>/``: the files ``boomfmi identify`` and ``boomfmi
   diagnose`` write, then ``case.json`` (moved into place last, so a folder without it
   is no result).  A re-run skips each case whose ``case.json`` says done for the very
-  same input (the fingerprint of its recordings' and sidecars' bytes and roles); a
-  failed case, or one whose recordings changed, is run again.
+  same input (the fingerprint of its recordings' and sidecars' bytes and roles, and
+  the ``ssp`` given); a failed case, or one whose recordings or ``ssp`` changed, is run
+  again.
 * **Failures.**  A case that raises is reported with its error and traceback in its
   ``case.json`` and in ``campaign.json``; the rest go on.  A worker lost in mid-case
   (killed, out of memory, its machine gone) is the scheduler's to handle: the case is
@@ -201,12 +202,12 @@ def run_cases(manifest: Manifest, out, engine: Engine, ssp=None, progress=None) 
     records: dict[tuple, dict] = {}
     todo = deque()
     for case in manifest.cases:
-        fp = case_spec(case, ssp)["fingerprint"]
-        done = load_done(case_folder(out, case), fp)
+        spec = case_spec(case, ssp)          # its files read and hashed once: kept for the run
+        done = load_done(case_folder(out, case), spec["fingerprint"])
         if done is not None:
             records[case.key] = dict(done, resumed=True)
         else:
-            todo.append((case, fp))
+            todo.append((case, spec))
     bar = Progress(len(manifest.cases), len(records), progress)
     bar.start()
     running: dict = {}
@@ -214,8 +215,7 @@ def run_cases(manifest: Manifest, out, engine: Engine, ssp=None, progress=None) 
 
     def submit():
         while todo and len(running) < 2 * engine.slots() + 1:
-            case, fp = todo.popleft()
-            spec = case_spec(case, ssp)
+            case, spec = todo.popleft()
             key = f"boomfmi-case-{slug(case.machine)}-{slug(case.date)}-{spec['fingerprint'][:12]}"
             fut = engine.client.submit(run_case, spec, key=key, pure=False)
             running[fut.key] = (case, spec["fingerprint"])

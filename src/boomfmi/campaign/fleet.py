@@ -33,13 +33,13 @@ from pathlib import Path
 
 import numpy as np
 
+from ..identify.fit import PARAMS
 from ..physics import reference_rig
 from .manifest import write_manifest
 
 KINDS = ("none", "leak", "friction", "valve", "none", "leak", "friction", "none")
 #: the flag that names each kind's change (any of them)
 EXPECTED = {"leak": ("piston_leakage",), "friction": ("F_d", "F_s"), "valve": ("valve_dynamics",)}
-LOAD = ("K_v", "F_s", "F_d", "F_L", "M")
 DURATION = 7.0          #: [s] of each experiment
 START = "2025-01-06"    #: the first week's date (a Monday)
 
@@ -55,7 +55,7 @@ def plan_fleet(machines: int = 8, weeks: int = 6, seed: int = 20, start: str = S
     for i in range(machines):
         name = f"m{i + 1:02d}"
         kind = KINDS[i % len(KINDS)]
-        load = {k: float(getattr(reference_rig, k) * rng.uniform(0.92, 1.08)) for k in LOAD}
+        load = {k: float(getattr(reference_rig, k) * rng.uniform(0.92, 1.08)) for k in PARAMS}
         load["F_s"] = max(load["F_s"], 1.1 * load["F_d"])
         onset = int(rng.integers(1, weeks)) if kind != "none" else None
         plan_weeks = []

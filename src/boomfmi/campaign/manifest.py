@@ -22,19 +22,21 @@ holdout recordings diagnosed together, as ``boomfmi diagnose`` does.
 :func:`read_manifest` checks everything that can be checked before any work starts
 and raises :class:`ManifestError` naming the file, the line and the column of each
 fault: a missing column, an empty field, an unknown role, a date that is not ISO 8601,
-a recording or sidecar that is not there, a recording listed twice, a case with no
-fit or no holdout recording.
+a recording or sidecar that is not there, a recording whose header is not a boom
+recording's, a sidecar its recording's reader would refuse (``recording.read_sidecar``),
+a recording listed twice, a case with no fit or no holdout recording.
 """
 from __future__ import annotations
 
 import csv
 import hashlib
 import io
-import json
 import re
 from dataclasses import dataclass, field
 from datetime import date, datetime
 from pathlib import Path
+
+from ..recording import KINDS, RecordingError, read_header, read_sidecar, recording_kind
 
 REQUIRED = ("machine", "date", "role", "recording")
 OPTIONAL = ("sidecar",)
@@ -230,33 +232,36 @@ def read_manifest(path) -> Manifest:
 
 def _check_header(rec: Path) -> str | None:
     """What is wrong with a recording's header row, where a look at it tells (the full
-    reading comes with its case)."""
+    reading comes with its case): a campaign diagnoses the boom's recordings, so the
+    boom's required columns (``recording.KINDS``), and no excavator column, which would
+    make the reader take it for the whole excavator's."""
     try:
-        with open(rec, encoding="utf-8-sig", newline="") as f:
-            first = f.readline(1 << 16)
-    except UnicodeDecodeError as e:
-        return f"not UTF-8 text ({e.reason} at byte {e.start})"
+        header = read_header(rec)
+    except RecordingError as e:
+        return e.message
     except OSError as e:
         return f"cannot be read ({e.strerror})"
-    if not first.strip():
-        return "empty file: no header row"
-    header = [h.strip() for h in next(csv.reader([first]))]
-    missing = [c for c in ("t", "u", "p_a", "p_b", "alpha") if c not in header]
+    missing = [c for c in KINDS["boom"]["required"] if c not in header]
     if missing:
         return (f"not a boom recording (recording-format.md): no column {', '.join(missing)} "
                 f"in its header ({', '.join(repr(h) for h in header[:8])})")
+    if recording_kind(header) != "boom":
+        other = next(h for h in header if h in KINDS["excavator"]["required"] and h != "t")
+        return (f"not a boom recording (recording-format.md): its header has the whole excavator's column "
+                f"{other!r} (shared/spec/excavator.md); a campaign diagnoses the boom's")
     return None
 
 
 def _check_sidecar(side: Path) -> str | None:
+    """What is wrong with a sidecar, as its recording's reader would find it."""
     if not side.is_file():
         return f"{'not a file' if side.exists() else 'no such file'} ({side})"
     try:
-        doc = json.loads(side.read_text(encoding="utf-8-sig"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as e:
-        return f"not JSON ({e})"
-    if not isinstance(doc, dict):
-        return "not a JSON object"
+        read_sidecar(side)
+    except RecordingError as e:
+        return e.message
+    except OSError as e:
+        return f"cannot be read ({e.strerror})"
     return None
 
 

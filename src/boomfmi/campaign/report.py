@@ -16,30 +16,31 @@ from pathlib import Path
 from .._json import dumps
 from ..outputs import OutputSet
 from .manifest import slug
-from .trend import LOAD, machine_trends
-
-UNITS = {"K_v": "N s/m", "F_s": "N", "F_d": "N", "F_L": "N", "M": "kg"}
+from .trend import machine_trends
 
 
 def write_campaign(out: Path, manifest, records: list[dict], run: dict) -> dict:
     out = Path(out)
-    cases = []
+    cases, by_machine = [], {}      # by_machine: each machine's rows, and its cases as machine_trends takes them
     for case, rec in zip(manifest.cases, records):
         s = rec.get("summary") or {}
-        cases.append({"machine": case.machine, "date": case.date, "status": rec["status"],
-                      "folder": (Path("cases") / case.folder).as_posix(), "resumed": bool(rec.get("resumed")),
-                      "worker": rec.get("worker"), "wall_s": rec.get("wall_s"), "error": rec.get("error"),
-                      "recordings": rec.get("recordings"),
-                      "judgeable": s.get("judgeable"), "verdict": s.get("verdict"), "reason": s.get("reason"),
-                      "params": s.get("params"), "nrmse_holdout": s.get("nrmse_holdout"),
-                      "gap_threshold": s.get("gap_threshold"),
-                      "effects": {n: {"gain": e["gain"], "shrink": e["shrink"], "params": e["params"]}
-                                  for n, e in (s.get("effects") or {}).items()}})
-    machines = {}
+        row = {"machine": case.machine, "date": case.date, "status": rec["status"],
+               "folder": (Path("cases") / case.folder).as_posix(), "resumed": bool(rec.get("resumed")),
+               "worker": rec.get("worker"), "wall_s": rec.get("wall_s"), "error": rec.get("error"),
+               "recordings": rec.get("recordings"),
+               "judgeable": s.get("judgeable"), "verdict": s.get("verdict"), "reason": s.get("reason"),
+               "params": s.get("params"), "nrmse_holdout": s.get("nrmse_holdout"),
+               "gap_threshold": s.get("gap_threshold"),
+               "effects": {n: {"gain": e["gain"], "shrink": e["shrink"], "params": e["params"]}
+                           for n, e in (s.get("effects") or {}).items()}}
+        cases.append(row)
+        by_machine.setdefault(case.machine, []).append(
+            (row, {"date": case.date, "status": rec["status"], "summary": rec.get("summary")}))
+    machines, units = {}, {}
     for m in manifest.machines:
-        mine = [c for c in cases if c["machine"] == m]
-        trends = machine_trends([{"date": c["date"], "status": c["status"],
-                                  "summary": (records[cases.index(c)].get("summary"))} for c in mine])
+        mine = [row for row, _ in by_machine[m]]
+        units[m] = {k: p.get("unit") for c in mine for k, p in (c["params"] or {}).items()}
+        trends = machine_trends([dated for _, dated in by_machine[m]])
         last = mine[-1]
         machines[m] = {"cases": len(mine), "failed": sum(c["status"] != "done" for c in mine),
                        "last": {"date": last["date"], "status": last["status"], "verdict": last["verdict"],
@@ -47,23 +48,24 @@ def write_campaign(out: Path, manifest, records: list[dict], run: dict) -> dict:
                        "flags": trends.pop("flags"), "trends": trends,
                        "plot": f"trend_{slug(m)}.png"}
     doc = {"run": run, "machines": machines, "cases": cases}
-    plots = [f"trend_{slug(m)}.png" for m in machines]
     stale = [p.name for p in out.glob("trend_*.png")] if out.is_dir() else []
     with OutputSet(out, stale=stale + ["campaign.json", "campaign.html"]) as files:
         for m, info in machines.items():
-            _plot(files.path(info["plot"]), m, info["trends"])
-        files.path("campaign.html").write_text(_html(doc, plots))
+            _plot(files.path(info["plot"]), m, info["trends"], units[m])
+        files.path("campaign.html").write_text(_html(doc))
         files.path("campaign.json").write_text(dumps(doc, indent=1))
     return doc
 
 
-def _plot(path, machine: str, trends: dict) -> None:
+def _plot(path, machine: str, trends: dict, units: dict) -> None:
+    """The machine's trend plot: each parameter's value and interval by date (``units``:
+    each one's unit, as its cases' summaries give it), then each effect's size."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.dates as mdates
     import matplotlib.pyplot as plt
     from datetime import datetime
-    params = [k for k in LOAD if k in trends["parameters"]]
+    params = list(trends["parameters"])         # machine_trends': identify.fit.PARAMS's order
     effects = {n: s for n, s in trends["effects"].items() if any(p["in_verdict"] or p["gain"] > p["margin"] for p in s)}
     rows = len(params) + 1
     fig, axes = plt.subplots(rows, 1, figsize=(8, 1.6 * rows + 0.6), sharex=True, squeeze=False)
@@ -80,7 +82,7 @@ def _plot(path, machine: str, trends: dict) -> None:
         ref = next((p for p in pts if p["date"] == ref_date), None)
         if ref and ref["ci95"] and None not in ref["ci95"]:
             ax.axhspan(ref["ci95"][0], ref["ci95"][1], color="tab:blue", alpha=0.12, lw=0)
-        ax.set_ylabel(f"{k} [{UNITS.get(k, '')}]", fontsize=8)
+        ax.set_ylabel(f"{k} [{units.get(k) or ''}]", fontsize=8)
         ax.tick_params(labelsize=7)
     ax = axes[-1]
     for n, series in effects.items():
@@ -113,7 +115,7 @@ def _verdict(v) -> str:
     return "none (no gap)" if v == [] else " + ".join(v)
 
 
-def _html(doc: dict, plots: list[str]) -> str:
+def _html(doc: dict) -> str:
     e = html.escape
     run = doc["run"]
     rows = []

@@ -35,9 +35,8 @@ from __future__ import annotations
 
 import math
 
+from ..identify.fit import PARAMS
 from .manifest import date_key
-
-LOAD = ("K_v", "F_s", "F_d", "F_L", "M")
 
 
 def _interval(p: dict | None) -> tuple[float, float, float] | None:
@@ -109,7 +108,7 @@ def machine_trends(cases: list[dict]) -> dict:
     if not judged:
         return out
     ref = judged[0]["summary"]
-    names = [k for k in LOAD if any(k in (c["summary"].get("params") or {}) for c in judged)]
+    names = [k for k in PARAMS if any(k in (c["summary"].get("params") or {}) for c in judged)]
     for k in names:
         own = [(c["date"], (c["summary"].get("params") or {}).get(k) or {}) for c in judged]
         # the reference: the first date on which identification could tell the parameter

@@ -30,12 +30,18 @@ from .localise import localise
 MIN_TRAVEL = 1e-3     #: [m] a recording whose piston moves less than this cannot be judged
 
 
-def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=None, progress=None) -> dict:
+def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=None, progress=None,
+             baseline=None) -> dict:
     """Run the diagnosis and write its outputs into ``out_dir`` (as one set: all of them
     or, on an error or interrupt, none; a PNG this run does not draw is removed); return
     the JSON document.  ``workers``: processes for the candidates' fits (default: one
     per core); ``ssp``: the boom's system for the FMUs' confirmation (default
-    build/excavator_boom.ssp); ``progress(text)``: told of each stage as it starts."""
+    build/excavator_boom.ssp); ``progress(text)``: told of each stage as it starts.
+    ``baseline``: the baseline's identification on ``fit_paths`` where the caller wants
+    it too (a campaign's case writes it as params.json): ``identify_recordings(fit_paths,
+    "fit")``'s ``(FitResult, recordings)``, or a callable returning them, called only
+    where the recordings can be judged (a memoised one then gives the caller the same);
+    default: identified here."""
     say = progress or (lambda text: None)
     if not hold_paths:
         raise ValueError("diagnose needs at least one holdout recording (--holdout): shrink is measured there")
@@ -63,7 +69,10 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
         return doc
 
     say(f"identifying the baseline on {len(fit_recs)} fit recording(s)")
-    result, _, _ = identify_recordings(fit_paths, "fit")
+    if baseline is None:
+        result, _, _ = identify_recordings(fit_paths, "fit")
+    else:
+        result, _ = baseline() if callable(baseline) else baseline
     for w in result.warnings:
         say(f"warning (baseline): {w}")
     values = result.values()
