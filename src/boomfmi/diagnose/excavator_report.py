@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from .._json import dumps, plain
+from ..compare import as_sensed
 from ..identify.excavator_outputs import (bound_machine, cannot_tell, check_same_rig, excavator_nrmse,
                                           identify_recs, machine_for, measured_pistons, read_excavator_recordings,
                                           simulate_machine, ssv_values)
@@ -52,10 +53,8 @@ from ..recording import check_distinct
 from .attribute import ABS_FLOOR, MIN_SHRINK, NOISE_FACTOR
 from .excavator import _span, diagnose_excavator, joint_cut, joint_pressures
 from .localise import _windows
+from .report import OUTPUTS
 
-#: every file an excavator diagnosis writes (the boom's PNGs, if an earlier run drew them, are removed)
-OUTPUTS = ("diagnosis.json", "report.html", "overlay_x.png", "overlay_p_a.png", "overlay_p_b.png",
-           "residual_breakdown.png")
 MIN_TRAVEL = 1e-3     #: [m] a piston that moves this much was exercised (the boom's diagnose.report)
 NOTE = ("The per-joint cut runs each joint's valve and chambers on the holdout's recorded command and measured "
         "motion: it needs no identified load, so the baseline identified on the fit recordings does not change "
@@ -112,7 +111,8 @@ def diagnose_excavator_recordings(fit_paths, hold_paths, out_dir, progress=None)
             best = f.candidates[0] if f.verdict and f.verdict != "unexplained" else None
             after = joint_pressures(cut, j, hx, {best[0]: _settings(best[0], best[1])}) if best else None
             curves[j] = (cut, pa, pb, after, best)
-            ea, eb = ((m - s) / _span(m) for m, s in ((cut.p_a_raw, pa), (cut.p_b_raw, pb)))
+            # as the cut's gap compares them (each pressure as its sensor reads it)
+            ea, eb = ((as_sensed(m, s) - m) / _span(m) for m, s in ((cut.p_a_raw, pa), (cut.p_b_raw, pb)))
             gaps = {f"p_a_{j}": float(np.sqrt(np.mean(ea ** 2))), f"p_b_{j}": float(np.sqrt(np.mean(eb ** 2)))}
             u = h.data[f"u_{j}"].to_numpy(float)
             opened = bool(np.any(np.abs(u - reference_rig.u_centre) > 0.5))

@@ -47,6 +47,7 @@ import numpy as np
 import pandas as pd
 
 from .._json import dumps, plain
+from ..compare import as_sensed
 from ..outputs import OutputSet
 from ..physics import excavator as exc
 from ..recording import Recording, check_distinct, check_plausible, read_recording
@@ -265,7 +266,8 @@ def excavator_nrmse(sim: pd.DataFrame, rec, ex: exc.Excavator) -> dict[str, dict
         row = {}
         for c, measured, floor in (("x", x[:, i], X_SPAN_MIN), ("p_a", d[f"p_a_{j}"].to_numpy(float), P_SPAN_MIN),
                                    ("p_b", d[f"p_b_{j}"].to_numpy(float), P_SPAN_MIN)):
-            err = np.asarray(sim[f"{c}_{j}"], float) - measured
+            model = np.asarray(sim[f"{c}_{j}"], float)
+            err = (model if c == "x" else as_sensed(measured, model)) - measured    # pressures as sensed
             row[c] = float(np.sqrt(np.mean(err ** 2)) / max(float(np.ptp(measured)), floor))
         out[j] = row
     return out
