@@ -42,7 +42,7 @@ import numpy as np
 
 from .. import physics as ph
 from ..physics import excavator as exc
-from .fit import (SYSTEMATIC, Estimate, FitResult, REACH, motion, motion_modes, static_friction, _widened)
+from .fit import (Estimate, FitResult, REACH, motion, motion_modes, static_friction, _widened)
 from .preprocess import CUTOFF, Prepared, lowpass
 
 JOINTS = exc.JOINTS
@@ -256,15 +256,6 @@ def identify_excavator(recordings, ex: exc.Excavator = exc.Excavator(), cutoff: 
     return FitResult("fit-excavator", ordered, warnings, details)
 
 
-def identified_machine(result: FitResult, ex: exc.Excavator = exc.Excavator()):
-    """``(Excavator, payload)`` with the identified friction per cylinder."""
-    from dataclasses import replace
-    v = result.values()
-    changes = {j: replace(getattr(ex, j), K_v=v[f"K_v_{j}"], F_d=v[f"F_d_{j}"],
-                          F_s=max(v[f"F_s_{j}"], v[f"F_d_{j}"])) for j in JOINTS}
-    return replace(ex, **changes), max(0.0, v["payload"])
-
-
 def true_values(ex: exc.Excavator = exc.Excavator(), payload: float = 0.0) -> dict:
     """The machine's own values under this module's names (for tests and benchmarks)."""
     out = {f"{n}_{j}": getattr(a, n) for j, a in zip(JOINTS, ex.actuators) for n in JOINT_PARAMS}
@@ -272,5 +263,5 @@ def true_values(ex: exc.Excavator = exc.Excavator(), payload: float = 0.0) -> di
     return out
 
 
-__all__ = ["identify_excavator", "prepare_excavator", "equation_error", "identified_machine", "true_values",
+__all__ = ["identify_excavator", "prepare_excavator", "equation_error", "true_values",
            "JOINTS", "UNITS"]

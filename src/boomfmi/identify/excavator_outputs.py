@@ -21,9 +21,8 @@ the boom's ``write_outputs`` does and as one set (``outputs.OutputSet``):
 
 What ``params.ssv`` binds is what a machine can have (the linkage FMU rejects the rest):
 a negative friction value is left out (the SSP's own value stays; a warning says so),
-F_s is raised to F_d where it is below it (Eq. 9) and a negative payload is bound as 0,
-as :func:`~boomfmi.identify.excavator.identified_machine` does.  The NRMSE are those of
-that same machine.
+F_s is raised to F_d where it is below it (Eq. 9) and a negative payload is bound as 0
+(:func:`ssv_values`, :func:`bound_machine`).  The NRMSE are those of that same machine.
 
 **The identified machine on a recording** (:func:`simulate_machine`): the monolithic
 reference (``model.excavator_reference``) with the identified values, driven by the
