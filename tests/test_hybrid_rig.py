@@ -307,3 +307,22 @@ def test_effect_free_recording_matches_boomfmis_model(tmp_path):
     # pressures stay between exhaust and supply by physics (nothing clamps them)
     assert f.p_a_true.min() > -1.0 and f.p_b_true.min() > -1.0
     assert max(f.p_a_true.max(), f.p_b_true.max()) < plant.P_s - plant.P_atm + 1.0
+
+
+def test_a_narrow_deadband_is_found_by_the_candidates_screen():
+    """A spool overlap of 0.05 V (the catalogue's range is 0.01 to 1.5 V, screened on a log
+    scale: a linear screen's first point, 0.2 V, closes the valve where the rig's is
+    open, and the fit stopped there): fitted within 40 % on the independent rig."""
+    from boomfmi.diagnose.attribute import SCREEN, fit_effects, mean_errors
+    from boomfmi.recording import read_recording
+    import tempfile
+    plant = H.Plant(effects={"valve_deadband": {"form": "overlap", "d": 0.05}})
+    cmd = random_steps(21, duration=6.0)
+    with tempfile.TemporaryDirectory() as d:
+        H.write(Path(d) / "fit.csv", H.simulate(plant, cmd, seed=4), truth=False)
+        rec = read_recording(Path(d) / "fit.csv")
+    values = {k: getattr(plant, k) for k in ("K_v", "F_s", "F_d", "F_L", "M")}
+    base = sum(e * e for e in mean_errors(values, {}, [rec]).values())
+    fx, cost = fit_effects(["valve_deadband"], values, [rec], baseline_cost=base)
+    assert 0.03 < fx["valve_deadband"]["width"] < 0.07
+    assert cost < (1.0 - SCREEN) * base

@@ -8,9 +8,9 @@ and p_b.
 
 * **Laws.**  Where a mechanism has more than one law (a seal that leaks laminar,
   turbulent or both; a sensor path with a lag, or a dead time and a lag), each is
-  fitted and the one that fits the fit recordings best is kept; a law that holds
-  another's parameters and more is tried only where the smaller one explains
-  something.
+  screened over its range and the one that screens best on the fit recordings is
+  fitted; a law that holds another's parameters and more is screened only where the
+  smaller one explains something.
 * **Fits.**  An effect's parameters are fitted by output error of the whole model (the
   monolithic reference with the effect on, ``compare.simulate_recording``), each
   channel's residual over its range.  Its range is screened first
@@ -24,7 +24,9 @@ and p_b.
   Eq. 8 and 9 (:func:`_fit_friction`), so a baseline that absorbed part of the effect
   does not hide it.
 * **Pairs.**  Where no single effect explains the gap, or the best leaves a gap, pairs
-  among the ``PAIR_POOL`` best singles are fitted jointly (:func:`_pairs`); each effect
+  among the ``PAIR_POOL`` best singles (and the single that fitted the fit recordings
+  best) are fitted jointly (:func:`_pairs`), from the singles' fits or from the
+  stronger's fit with the other fitted beside it, whichever fits better; each effect
   of a pair must pay for itself (remove ``MIN_SHRINK_SECOND`` of what the other alone
   leaves beyond the holdout's noise floor), so that noise is not explained by a second
   effect.
@@ -33,16 +35,20 @@ Decisions carry margins against the recordings' own noise:
 
 * no gap: the baseline's holdout error is within ``NOISE_FACTOR`` times the noise
   floor (each channel's noise over its range) plus ``ABS_FLOOR``: verdict ``[]``, and
-  no candidate is fitted (none could show more than the noise);
+  no candidate is fitted by the outputs (none could show more than the noise), unless
+  the load's own fit tells pressure_friction (:func:`_friction_told`: the seals'
+  friction that the baseline's F_d holds at the mean pressure, which may leave the
+  outputs within their noise);
 * a pair that passes (see above): the pair; else the best single effect if it
   shrinks the error by at least ``MIN_SHRINK``;
 * otherwise ``["unexplained"]``, but only where the gap is also beyond what the
   baseline's own uncertainty moves its prediction (each identified parameter at the
   nearer end of its 95 % interval, combined in quadrature: :func:`baseline_spread`);
-  a gap within that, which no effect explains, is ``[]``: the identification itself
-  leaves it open.  (A threshold that added the spread before any fit hid effects the
-  baseline's re-identification had made uncertain: those effects widen the intervals
-  they are then hidden behind.)
+  a gap within that, which no effect explains, is ``[]`` (or pressure_friction where
+  the load's fit tells it, as above): the identification itself leaves it open.  (A
+  threshold that added the spread before any fit hid effects the baseline's
+  re-identification had made uncertain: those effects widen the intervals they are
+  then hidden behind.)
 """
 from __future__ import annotations
 
@@ -74,6 +80,8 @@ PAIR_POOL = 3               #: the candidates among which pairs are tried
 SCREEN_POINTS = 4           #: points per parameter that screen an effect's range
 SCREEN = 0.02               #: the share of the fit error a screened point must remove to go on
 PAIR_EVALUATIONS = 24       #: the joint fit of a pair: its simplex's evaluations at most
+FRICTION_GAIN = 0.03   #: the share by which a seal-pressure law must lower the load's velocity misfit
+FRICTION_CLEAR = 0.25  #: and how far its coefficient's interval keeps from zero (its lower end / value)
 RTOL = 1e-5            #: the reference solver's tolerance when scoring
 FIT_RTOL = 1e-4        #: and while fitting (each fit runs the model a dozen times or more)
 
@@ -130,7 +138,8 @@ class Candidate:
 
 def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = None,
                 fixed: dict | None = None, forms: dict | None = None,
-                baseline_cost: float | None = None, max_evaluations: int = 40) -> tuple[dict, float]:
+                baseline_cost: float | None = None, max_evaluations: int = 40,
+                screen_only: bool = False, screened: tuple | None = None) -> tuple[dict, float]:
     """Fit the parameters of the effects ``names`` together on the fit recordings:
     ``({name: {param: value}}, cost)``.
 
@@ -144,7 +153,9 @@ def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = N
     (``{name: {param: value}}``, e.g. each effect's own fit) starts Nelder-Mead there.
     ``fixed``: further effects switched on with their parameters held (returned with
     the fit).  ``forms``: {name: [(param, lower, upper, log)]} in place of
-    CANDIDATES[name]."""
+    CANDIDATES[name].  ``screen_only``: the best screened point, not refined;
+    ``screened``: ``(effects, cost)``, such a point from before, refined without a
+    screen anew."""
     spec = [(n, *s) for n in names for s in (forms or {}).get(n, CANDIDATES[n])]
 
     def to_effects(z):
@@ -165,16 +176,19 @@ def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = N
                        options={"maxfev": max_evaluations, "xatol": 1e-3, "fatol": 1e-9})
         return to_effects(res.x), float(res.fun)
     points = SCREEN_POINTS if len(spec) == 1 else SCREEN_POINTS - 1
-    levels = [lo + (np.arange(points) + 0.5) / points * (hi - lo) for lo, hi in bounds]
-    screened = [(cost(z), list(z)) for z in itertools.product(*levels)]
-    fun, z0 = min(screened, key=lambda c: c[0])
-    if baseline_cost is not None and fun > (1.0 - SCREEN) * baseline_cost:
+    if screened is None:
+        levels = [lo + (np.arange(points) + 0.5) / points * (hi - lo) for lo, hi in bounds]
+        fun, z0 = min([(cost(z), list(z)) for z in itertools.product(*levels)], key=lambda c: c[0])
+    else:
+        fun = float(screened[1])
+        z0 = [math.log10(screened[0][n][p]) if log else screened[0][n][p] for n, p, lo, hi, log in spec]
+    if screen_only or (baseline_cost is not None and fun > (1.0 - SCREEN) * baseline_cost):
         return to_effects(z0), float(fun)
     if len(spec) == 1:
         lo, hi = bounds[0]
         step = (hi - lo) / points
         res = minimize_scalar(lambda v: cost([v]), bounds=(max(lo, z0[0] - step), min(hi, z0[0] + step)),
-                              method="bounded", options={"xatol": 0.02 * (hi - lo)})
+                              method="bounded", options={"xatol": 0.03 * (hi - lo)})
         return (to_effects([res.x]), float(res.fun)) if res.fun < fun else (to_effects(z0), float(fun))
     res = minimize(cost, z0, method="Nelder-Mead", bounds=bounds,
                    options={"maxfev": 30, "xatol": 1e-3, "fatol": 1e-9})
@@ -191,22 +205,26 @@ class Attribution:
     threshold: float = 0.0    #: the summed NRMSE beyond which a gap no effect explains is "unexplained"
     spread: dict = field(default_factory=dict)   #: the baseline's own uncertainty, per channel
     beyond_noise: float = 0.0  #: the summed NRMSE beyond which candidates are fitted (noise alone)
+    told: bool = False         #: the verdict was told by the load's own fit (:func:`_friction_told`), not the gap
 
 
 def _fit_and_score(args):
     name, values, fit_recs, hold_recs, fixed, base_cost = args
     if EFFECTS[name].stage == "friction" and not fixed:
         return _fit_friction(name, fit_recs, hold_recs)
-    fits = []
+    screens = []
     for form in FORMS.get(name, [CANDIDATES[name]]):
         # a law that holds another's parameters and more (a leak both laminar and
         # turbulent) is tried only where a law it holds explains something
-        subsets = [f for f in fits if set(f[2]) < {q[0] for q in form}]
+        subsets = [f for f in screens if set(f[2]) < {q[0] for q in form}]
         if subsets and not any(f[1] <= (1.0 - SCREEN) * base_cost for f in subsets):
             continue
-        fx, cost = fit_effects([name], values, fit_recs, fixed=fixed, forms={name: form}, baseline_cost=base_cost)
-        fits.append((fx, cost, [q[0] for q in form]))
-    fx, cost, _ = min(fits, key=lambda f: f[1])
+        fx, cost = fit_effects([name], values, fit_recs, fixed=fixed, forms={name: form}, screen_only=True)
+        screens.append((fx, cost, [q[0] for q in form], form))
+    # every law screened, the one that screens best refined
+    fx, cost, _, form = min(screens, key=lambda f: f[1])
+    fx, cost = fit_effects([name], values, fit_recs, fixed=fixed, forms={name: form}, baseline_cost=base_cost,
+                           screened=(fx, cost))
     return name, fx, cost, mean_errors(values, fx, hold_recs), None
 
 
@@ -264,6 +282,51 @@ def _fit_pressure_friction(name, rig, preps, fit_recs, hold_recs):
         fits.append((cost, fx, joint))
     cost, fx, joint = min(fits, key=lambda f: f[0])
     return name, fx, cost, mean_errors(joint, fx, hold_recs), joint
+
+
+def _friction_told(fit_recs, hold_recs, before: dict):
+    """pressure_friction where the outputs cannot show it: the baseline's F_d takes the
+    seals' friction at the recordings' mean pressure, and what is left may sit within
+    the output noise.  The load's own fit still tells it: the friction moves with the
+    pressure sample by sample.  Named (a :class:`Candidate`, score 1) only where
+
+    * the velocity fit of the load with the coefficient (``identify.fit``, the best of
+      the seal-pressure laws) misses the recorded velocities by ``FRICTION_GAIN`` less
+      than without it (over every sliding run: neither noise nor an effect on the
+      pneumatics, which the load's fit reads through the recorded pressures, moves it);
+    * the coefficient's 95 % interval keeps clear of zero (its lower end at least
+      ``FRICTION_CLEAR`` of the value); and
+    * the model with it does not predict the holdout worse than the baseline (shrink
+      > 0), which was never fitted on.
+
+    None otherwise (the verdict stays as it was)."""
+    rig = rig_model(fit_recs[0])
+    preps = [prepare(r, geometry=rig.geometry, P_atm=rig.P_atm) for r in fit_recs]
+    plain = identify(preps, rig.cylinder, rig.P_atm, valve=rig.valve, gas=rig.gas)
+    rms0 = plain.details.get("velocity_error", {}).get("rms_velocity_m_s", math.nan)
+    if not math.isfinite(rms0):
+        return None
+    best = None
+    for law, q in PRESSURE_COEFFICIENT.items():
+        res = identify(preps, rig.cylinder, rig.P_atm, valve=rig.valve, gas=rig.gas, pressure=law)
+        rms = res.details.get("velocity_error", {}).get("rms_velocity_m_s", math.inf)
+        c = res.params.get(q)
+        if c is None or not rms <= (1.0 - FRICTION_GAIN) * rms0 or not c.ci95[0] >= FRICTION_CLEAR * c.value > 0.0:
+            continue
+        if best is None or rms < best[0]:
+            best = (rms, q, res.values())
+    if best is None:
+        return None
+    rms, q, found = best
+    bounds = next(p for p in EFFECTS["pressure_friction"].parameters if p.name == q)
+    joint = {k: v for k, v in found.items() if k not in PRESSURE_COEFFICIENT.values() and math.isfinite(v)}
+    fx = {q: float(min(max(found[q], bounds.lower), bounds.upper))}
+    after = mean_errors(joint, {"pressure_friction": fx}, hold_recs)
+    gain = shrink(before, after)
+    if not gain > 0.0:
+        return None
+    cost = sum(e * e for e in mean_errors(joint, {"pressure_friction": fx}, fit_recs, FIT_RTOL).values())
+    return Candidate("pressure_friction", fx, cost, after, gain, score=1.0, values=joint)
 
 
 def _cost(job) -> int:
@@ -330,9 +393,10 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     # within the baseline's own uncertainty a gap is no finding by itself: an effect that
     # explains it is still named, but what no effect explains there is not "unexplained"
     uncertain = sum(before.values()) <= threshold
-    if not gap:        # nothing beyond the noise: no fit can show more
-        att = Attribution(before, noise, gap, [], [])
-        att.threshold, att.spread, att.beyond_noise = threshold, spread, beyond_noise
+    if not gap:        # nothing beyond the noise: no output fit can show more
+        told = _friction_told(fit_recs, hold_recs, before)
+        att = Attribution(before, noise, gap, [told] if told else [], [told.name] if told else [])
+        att.threshold, att.spread, att.beyond_noise, att.told = threshold, spread, beyond_noise, told is not None
         return att
     base_cost = sum(e * e for e in mean_errors(values, {}, fit_recs, FIT_RTOL).values())
     fitted = _map(_fit_and_score, [(n, values, fit_recs, hold_recs, None, base_cost) for n in names], workers)
@@ -345,6 +409,7 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     for c, w in zip(cands, weights):
         c.score = round(best_strength * w / total_w, 4)
     verdict: list = []
+    told = None
     if gap and cands:
         best = cands[0]
         pair = None
@@ -361,30 +426,53 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
             verdict = [best.name]
         elif not uncertain:
             verdict = ["unexplained"]
+        else:
+            told = _friction_told(fit_recs, hold_recs, before)
+            if told is not None:
+                verdict = [told.name]
+                cands = [told] + [c for c in cands if c.name != told.name]
     att = Attribution(before, noise, gap, cands, verdict)
     att.threshold, att.spread, att.beyond_noise = threshold, spread, beyond_noise
+    att.told = told is not None
     return att
 
 
 def _pairs(cands, values, fit_recs, hold_recs, before, workers, noise: float = 0.0):
     """The best pair of effects, where no single one explains the gap or the best leaves
     one beyond the noise.  Pairs are drawn among the PAIR_POOL candidates that helped
-    most on their own (not only beside the best: two effects may each explain too
-    little alone), fitted jointly from their single fits.  A pair is kept only if it
+    most on the holdout on their own (not only beside the best: two effects may each
+    explain too little alone), and the one that fitted the fit recordings best (an
+    effect strong in the fit recordings and weak in the holdout), fitted jointly
+    (:func:`_fit_pair`).  A pair is kept only if it
     removes MIN_SHRINK of the gap and each of its effects pays for itself: removes at
     least MIN_SHRINK_SECOND of what the other one alone leaves beyond the noise (the
     penalty that keeps noise from being explained by a second effect; ``noise``: the
     holdout's noise floor summed over the channels, about the error a perfect model
     still shows, which no effect can remove)."""
-    pool = [c for c in cands if c.shrink > 0.0][:PAIR_POOL]
+    helped = [c for c in cands if c.shrink > 0.0]
+    pool = helped[:PAIR_POOL]
+    # and the one that explained most of the fit recordings, if not already in: an
+    # effect strong in the fit recordings but weak in the holdout is fitted there
+    # (another, absorbing it, may have done better on the holdout alone)
+    by_fit = sorted(helped, key=lambda c: c.fit_error)
+    if by_fit and by_fit[0] not in pool:
+        pool.append(by_fit[0])
     by_name = {c.name: c for c in cands}
     # where the best explains the gap on its own, a pair must hold it (another pair
     # would have to beat it with two effects the best does not need)
-    combos = ([(pool[0], c) for c in pool[1:]] if pool and pool[0].shrink >= MIN_SHRINK
-              else list(itertools.combinations(pool, 2)))
+    # would have to beat it with two effects the best does not need), and its partner
+    # must show on its own at least half of what it would have to remove beside the
+    # best (MIN_SHRINK_SECOND of what the best leaves beyond the noise): a second effect
+    # wholly hidden behind one that already explains the gap is not claimed
+    if pool and pool[0].shrink >= MIN_SHRINK:
+        total = sum(before.values())
+        needed = MIN_SHRINK_SECOND * (sum(pool[0].holdout.values()) - noise)
+        combos = [(pool[0], c) for c in pool[1:] if total - sum(c.holdout.values()) >= 0.5 * needed]
+    else:
+        combos = list(itertools.combinations(pool, 2))
     # a pair with a friction effect keeps the load identified with it
     jobs = [([a.name, b.name], a.values or b.values or values, fit_recs, hold_recs,
-             {a.name: a.params, b.name: b.params}, min(a.fit_error, b.fit_error))
+             {a.name: a.params, b.name: b.params}, {a.name: a.fit_error, b.name: b.fit_error})
             for a, b in combos]
     if not jobs:
         return None
@@ -408,15 +496,48 @@ def _pays(single: dict, pair: dict, noise: float) -> bool:
     return left > noise and left - after >= MIN_SHRINK_SECOND * (left - noise) and after < left
 
 
+def _halved(effect: str, parameter: str, value: float) -> float:
+    """The parameter at half its value where a smaller value is a weaker effect (a
+    switching parameter, whose 0 is off: a time constant, a width, a conductance, a
+    length, without a least value that is on: a polytropic exponent's 'off' is its
+    top), within its bounds; else as it is."""
+    q = next(p for p in EFFECTS[effect].parameters if p.name == parameter)
+    return max(0.5 * value, q.lower) if q.switch and q.on_min is None else value
+
+
 def _fit_pair(args):
-    """A pair fitted jointly from its singles' fits; None where, at that start, the pair
-    does not lower the fit error below its better single's by SCREEN (the second
-    effect adds nothing there, and a joint fit would only chase the noise)."""
-    names, values, fit_recs, hold_recs, start, single_cost = args
-    at_start = sum(e * e for e in mean_errors(values, start, fit_recs, FIT_RTOL).values())
-    if at_start > (1.0 - SCREEN) * single_cost:
+    """A pair fitted jointly; None where, at its start, the pair does not lower the fit
+    error below its better single's by SCREEN (the second effect adds nothing there,
+    and a joint fit would only chase the noise).
+
+    Up to three starts, each tried only where the ones before do not lower the fit
+    error by SCREEN, the best kept: both singles' fits; both halved (the parameters
+    whose size is the effect's strength, :func:`_halved`); and the better single's fit
+    held while the other effect's range is screened beside it (forward selection).
+    The first fails where both singles absorbed the same feature (a spool lag and a
+    sensor's dead time each take the whole delay: together they double it), which the
+    second meets; the third, where the weaker is hidden behind the stronger's fit."""
+    names, values, fit_recs, hold_recs, start, single_costs = args
+    forms = {n: [(q.name, q.lower, q.upper, q.log) for q in EFFECTS[n].parameters if q.name in start[n]]
+             for n in names}
+    single_cost = min(single_costs.values())
+    strong = min(names, key=lambda n: single_costs[n])
+    weak = next(n for n in names if n != strong)
+    at = lambda fx: sum(e * e for e in mean_errors(values, fx, fit_recs, FIT_RTOL).values())
+    enough = (1.0 - SCREEN) * single_cost
+    starts = [(at(start), start)]
+    # both singles taking the same feature whole (a delay): each takes half of it
+    halves = {n: {q: _halved(n, q, v) for q, v in start[n].items()} for n in names}
+    if starts[0][0] > enough and halves != start:
+        starts.append((at(halves), halves))
+    if min(c for c, _ in starts) > enough:   # the weaker hidden behind the stronger: screened beside it
+        held, cost = fit_effects([weak], values, fit_recs, fixed={strong: start[strong]},
+                                 forms={weak: forms[weak]}, screen_only=True)
+        starts.append((cost, held))
+    at_start, start = min(starts, key=lambda s: s[0])
+    if at_start > enough:
         return None
-    fx, cost = fit_effects(names, values, fit_recs, start=start, max_evaluations=PAIR_EVALUATIONS,
-                           forms={n: [(q.name, q.lower, q.upper, q.log) for q in EFFECTS[n].parameters
-                                      if q.name in start[n]] for n in names})
+    fx, cost = fit_effects(names, values, fit_recs, start=start, max_evaluations=PAIR_EVALUATIONS, forms=forms)
+    if cost > at_start:
+        fx, cost = start, at_start
     return names, fx, cost, mean_errors(values, fx, hold_recs)

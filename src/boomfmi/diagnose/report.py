@@ -109,6 +109,7 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
            "baseline_spread": {k: round(v, 6) for k, v in att.spread.items()},
            "gap_threshold": round(att.beyond_noise, 6),
            "gap_beyond_noise": att.gap,
+           "told_by_load_fit": att.told,
            "unexplained_threshold": round(att.threshold, 6),
            "where": loc.where if loc else [],
            "effects": effects,
@@ -194,6 +195,13 @@ def _html(doc: dict, images: list[str]) -> str:
                     "and no candidate effect explains it: no finding.")
     elif verdict == ["unexplained"]:
         headline = "A gap that no candidate effect explains (see where it lies below)."
+    elif not doc.get("gap_beyond_noise") or doc.get("told_by_load_fit"):
+        headline = ("<b>" + ", ".join(e(v) for v in verdict) + "</b>, told by the load's own fit: the friction "
+                    "moves with the chambers' pressure sample by sample (the velocity fit misses the recorded "
+                    "velocities less with it), while the outputs' gap "
+                    f"({100 * sum((doc['baseline'] or {}).get('nrmse_holdout', {}).values()):.2f} %) stays within "
+                    "what the noise or the baseline's uncertainty allows: the baseline's F_d holds the seals' "
+                    "friction at the recordings' mean pressure.")
     else:
         headline = "The gap is explained by: " + ", ".join(f"<b>{e(v)}</b>" for v in verdict)
     rows = "".join(

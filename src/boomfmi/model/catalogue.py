@@ -131,7 +131,7 @@ EFFECTS = {e.name: e for e in (
                 "valve_dynamics: time constant of the spool's first-order lag; 0: off"),),),
            "first-order lag of the spool: dy/dt = (u - y) / tau"),
     Effect("valve_deadband", "valve", "command",
-           ((_p("width", "V", 0.01, 1.5, False, "deadband",
+           ((_p("width", "V", 0.01, 1.5, True, "deadband",
                 "valve_deadband: half-width of the closed band around 5 V; 0: off", max=4.9),),),
            "no opening for |u - 5| < width; linear beyond, full opening still at 0 and 10 V",
            _deadband),
