@@ -124,3 +124,18 @@ def test_a_second_effect_pays_for_what_the_first_leaves_beyond_the_noise():
     assert _pays(one(0.05), one(0.03), noise)
     assert not _pays(one(0.003), one(0.0029), noise)         # within the noise nothing pays but a cut
     assert not _pays(one(0.003), one(0.0031), noise)         # a pair that is worse never pays
+
+
+def test_a_pair_starts_with_both_effects_halved_where_size_is_strength():
+    """Two singles that each took the same feature whole (a spool lag and a sensor's dead
+    time, each the whole delay) double it together: the pair's second start halves the
+    parameters whose size is the effect's strength, within their bounds, and leaves the
+    others (a polytropic exponent, whose 'off' is its top; a cushion needle's area)."""
+    from boomfmi.diagnose.attribute import _halved
+    from boomfmi.model import EFFECTS
+    assert _halved("valve_dynamics", "tau", 0.008) == pytest.approx(0.004)
+    assert _halved("sensor_lag", "delay", 0.006) == pytest.approx(0.003)
+    lower = next(p.lower for p in EFFECTS["valve_deadband"].parameters if p.name == "width")
+    assert _halved("valve_deadband", "width", 1.5 * lower) == pytest.approx(lower)
+    assert _halved("heat_transfer", "n", 1.2) == 1.2
+    assert _halved("end_cushioning", "A_n", 5e-7) == 5e-7

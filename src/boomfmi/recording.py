@@ -309,6 +309,36 @@ def read_sidecar(side) -> dict:
     return content
 
 
+def read_checked(paths, kind: str | None = None, role: str = "recording") -> list[Recording]:
+    """Read recordings for identification or diagnosis: each must be complete (not
+    marked ``incomplete`` in its sidecar), plausible (:func:`check_plausible`) and,
+    with ``kind`` (``"boom"`` or ``"excavator"``), of that kind (``role`` names them
+    in the errors: "fit recording", "holdout").  ``ValueError`` or
+    :class:`RecordingError` naming the file."""
+    recs = []
+    for p in paths:
+        r = read_recording(p)
+        if kind == "excavator" and r.kind != "excavator":
+            raise ValueError(f"{r.path}: a boom recording; this {role} must be the whole excavator's "
+                             f"(u_<joint>, p_a_<joint>, p_b_<joint>, angle_<joint>)")
+        if kind == "boom" and r.kind != "boom":
+            raise ValueError(f"{r.path}: an excavator recording; this {role} must be the boom's (t, u, p_a, p_b, "
+                             f"alpha)")
+        if r.incomplete:
+            raise ValueError(f"{r.path}: the recording is marked incomplete in its sidecar ({r.incomplete}); "
+                             f"record it again")
+        check_plausible(r)
+        recs.append(r)
+    return recs
+
+
+def check_same_rig(recs) -> None:
+    """``ValueError`` where the recordings' sidecars name different rigs."""
+    if len({json.dumps(r.rig, sort_keys=True) for r in recs}) > 1:
+        raise ValueError("the recordings come from different rigs (their sidecars' 'rig' values differ): "
+                         + ", ".join(str(r.path) for r in recs))
+
+
 def check_distinct(fits, hold: Recording) -> None:
     """Raise ``ValueError`` where the holdout ``hold`` is one of the fit recordings (the
     same file, or a copy of its samples): its error would be the fit's own, not a

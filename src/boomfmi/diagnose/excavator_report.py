@@ -43,13 +43,12 @@ import numpy as np
 
 from .._json import dumps, plain
 from ..compare import as_sensed
-from ..identify.excavator_outputs import (bound_machine, cannot_tell, check_same_rig, excavator_nrmse,
-                                          identify_recs, machine_for, measured_pistons, read_excavator_recordings,
-                                          simulate_machine, ssv_values)
+from ..identify.excavator_outputs import (bound_machine, cannot_tell, excavator_nrmse, identify_recs, machine_for,
+                                          measured_pistons, simulate_machine, ssv_values)
 from ..physics import reference_rig
 from ..physics.excavator import JOINTS
 from ..outputs import OutputSet
-from ..recording import check_distinct
+from ..recording import check_distinct, check_same_rig, read_checked
 from .attribute import ABS_FLOOR, MIN_SHRINK, NOISE_FACTOR
 from .excavator import _span, diagnose_excavator, joint_cut, joint_pressures
 from .localise import _windows
@@ -68,8 +67,8 @@ def diagnose_excavator_recordings(fit_paths, hold_paths, out_dir, progress=None)
     say = progress or (lambda text: None)
     if not hold_paths:
         raise ValueError("diagnose needs at least one holdout recording (--holdout): the joints are judged there")
-    fit_recs = read_excavator_recordings(fit_paths, "fit recording")
-    hold_recs = read_excavator_recordings(hold_paths, "holdout")
+    fit_recs = read_checked(fit_paths, "excavator", "fit recording")
+    hold_recs = read_checked(hold_paths, "excavator", "holdout")
     for h in hold_recs:
         check_distinct(fit_recs, h)
     check_same_rig([*fit_recs, *hold_recs])

@@ -22,7 +22,7 @@ from ..compare import CHANNELS, model_for, nrmse, recorded, rig_model, shrink, s
 from ..identify import identify_recordings
 from ..identify.preprocess import prepare
 from ..outputs import OutputSet
-from ..recording import check_distinct, check_plausible, read_recording
+from ..recording import check_distinct, check_same_rig, read_checked
 from .attribute import ABS_FLOOR, CANDIDATES, NOISE_FACTOR, attribute
 from .confirm import agreement, confirm
 from .localise import localise
@@ -46,19 +46,11 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
     if not hold_paths:
         raise ValueError("diagnose needs at least one holdout recording (--holdout): shrink is measured there")
     out = Path(out_dir)
-    fit_recs = [read_recording(p) for p in fit_paths]
-    hold_recs = [read_recording(p) for p in hold_paths]
-    for r in fit_recs + hold_recs:
-        if r.incomplete:
-            raise ValueError(f"{r.path}: the recording is marked incomplete in its sidecar ({r.incomplete}); "
-                             f"record it again")
-        check_plausible(r)
+    fit_recs = read_checked(fit_paths, role="fit recording")
+    hold_recs = read_checked(hold_paths, role="holdout")
     for h in hold_recs:
         check_distinct(fit_recs, h)
-    rigs = {json.dumps(r.rig, sort_keys=True) for r in fit_recs + hold_recs}
-    if len(rigs) > 1:
-        raise ValueError("the recordings come from different rigs (their sidecars' 'rig' values differ): "
-                         + ", ".join(str(r.path) for r in fit_recs + hold_recs))
+    check_same_rig(fit_recs + hold_recs)
     still = [str(r.path) for r in fit_recs + hold_recs if float(np.ptp(recorded(r)["x"])) < MIN_TRAVEL]
     if still:
         doc = {"judgeable": False,

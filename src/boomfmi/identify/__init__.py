@@ -7,14 +7,13 @@ paper's method as written.  :func:`identify_recordings` reads, prepares and fits
 """
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 from .._json import dumps, plain
 from ..compare import nrmse, recorded, rig_model, simulate_recording
 from ..outputs import OutputSet
-from ..recording import check_distinct, check_plausible, read_recording
+from ..recording import check_distinct, check_same_rig, read_checked, read_recording
 from ..system.ssv import write_ssv
 from .fit import FitResult, fit_A_max, identify
 from .paper import identify_paper
@@ -31,16 +30,8 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
     ``(FitResult, recordings, prepared)``."""
     if method not in ("fit", "paper"):
         raise ValueError(f"unknown method {method!r}: 'paper' or 'fit'")
-    recs = [read_recording(p) for p in paths]
-    for r in recs:
-        if r.incomplete:
-            raise ValueError(f"{r.path}: the recording is marked incomplete in its sidecar ({r.incomplete}); "
-                             f"record it again")
-        check_plausible(r)
-    rigs = {json.dumps(r.rig, sort_keys=True) for r in recs}
-    if len(rigs) > 1:
-        raise ValueError("the recordings come from different rigs (their sidecars' 'rig' values differ): "
-                         + ", ".join(str(r.path) for r in recs))
+    recs = read_checked(paths)
+    check_same_rig(recs)
     rig = rig_model(recs[0])
     preps = [prepare(r, cutoff, geometry=rig.geometry, P_atm=rig.P_atm) for r in recs]
     if method == "fit":

@@ -37,7 +37,6 @@ are the boom's (reference-rig names) and are reported as not applied.
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -49,7 +48,7 @@ from .._json import dumps, plain
 from ..compare import as_sensed
 from ..outputs import OutputSet
 from ..physics import excavator as exc
-from ..recording import Recording, check_distinct, check_plausible, read_recording
+from ..recording import Recording, check_distinct, check_same_rig, read_checked
 from ..system.ssv import write_ssv
 from .excavator import JOINT_PARAMS, JOINTS, UNITS, identify_excavator
 from .fit import FitResult
@@ -79,31 +78,6 @@ def param_joint(param: str) -> str | None:
     return param.rsplit("_", 1)[1] if param != "payload" else None
 
 
-def read_excavator_recordings(paths, role: str = "recording") -> list[Recording]:
-    """Read and check excavator recordings (``role`` names them in errors: "fit
-    recording", "holdout"); ``ValueError``/``RecordingError`` naming the file."""
-    recs = []
-    for p in paths:
-        r = read_recording(p)
-        if r.kind != "excavator":
-            raise ValueError(f"{r.path}: a boom recording; this {role} must be the whole excavator's "
-                             f"(u_<joint>, p_a_<joint>, p_b_<joint>, angle_<joint>)")
-        if r.incomplete:
-            raise ValueError(f"{r.path}: the recording is marked incomplete in its sidecar ({r.incomplete}); "
-                             f"record it again")
-        check_plausible(r)
-        recs.append(r)
-    return recs
-
-
-def check_same_rig(recs) -> None:
-    """``ValueError`` where the recordings' sidecars name different rigs."""
-    rigs = {json.dumps(r.rig, sort_keys=True) for r in recs}
-    if len(rigs) > 1:
-        raise ValueError("the recordings come from different rigs (their sidecars' 'rig' values differ): "
-                         + ", ".join(str(r.path) for r in recs))
-
-
 def machine_for(rec: Recording, ex: exc.Excavator | None = None) -> exc.Excavator:
     """``ex`` (default: ``excavator.md``'s machine) with the recording's P_atm."""
     ex = ex or exc.Excavator()
@@ -125,7 +99,7 @@ def identify_excavator_recordings(paths, cutoff: float = CUTOFF, ex: exc.Excavat
     """Read and check the recordings, identify per joint; ``(FitResult, recordings,
     Excavator)`` (the machine the identification assumed: ``ex`` with the recordings'
     P_atm)."""
-    recs = read_excavator_recordings(paths, "fit recording")
+    recs = read_checked(paths, "excavator", "fit recording")
     check_same_rig(recs)
     return identify_recs(recs, cutoff, ex)
 
@@ -318,7 +292,7 @@ def write_excavator_outputs(result: FitResult, recs, out, holdout=(), ex: exc.Ex
     say = progress or (lambda text: None)
     out = Path(out)
     ex = machine_for(recs[0], ex)
-    holds = read_excavator_recordings(holdout, "holdout")
+    holds = read_checked(holdout, "excavator", "holdout")
     for h in holds:
         check_distinct(recs, h)
     check_same_rig([*recs, *holds])
