@@ -312,8 +312,8 @@ def read_sidecar(side) -> dict:
 def read_checked(paths, kind: str | None = None, role: str = "recording") -> list[Recording]:
     """Read recordings for identification or diagnosis: each must be complete (not
     marked ``incomplete`` in its sidecar), plausible (:func:`check_plausible`) and,
-    with ``kind`` (``"boom"`` or ``"excavator"``), of that kind (``role`` names them
-    in the errors: "fit recording", "holdout").  ``ValueError`` or
+    with ``kind="excavator"``, the whole excavator's (``role`` names them in the
+    errors: "fit recording", "holdout").  ``ValueError`` or
     :class:`RecordingError` naming the file."""
     recs = []
     for p in paths:
@@ -321,9 +321,6 @@ def read_checked(paths, kind: str | None = None, role: str = "recording") -> lis
         if kind == "excavator" and r.kind != "excavator":
             raise ValueError(f"{r.path}: a boom recording; this {role} must be the whole excavator's "
                              f"(u_<joint>, p_a_<joint>, p_b_<joint>, angle_<joint>)")
-        if kind == "boom" and r.kind != "boom":
-            raise ValueError(f"{r.path}: an excavator recording; this {role} must be the boom's (t, u, p_a, p_b, "
-                             f"alpha)")
         if r.incomplete:
             raise ValueError(f"{r.path}: the recording is marked incomplete in its sidecar ({r.incomplete}); "
                              f"record it again")

@@ -269,17 +269,23 @@ def _fit_friction(name, fit_recs, hold_recs):
     return name, fx, cost, mean_errors(joint, fx, hold_recs), joint
 
 
-def _fit_pressure_friction(name, rig, preps, fit_recs, hold_recs):
-    fits = []
-    for form in EFFECTS[name].forms:
-        (q,) = form
+def _seal_laws(rig, preps):
+    """The load identified with pressure_friction by each seal-pressure law of the
+    catalogue: per law ``(result, fx, joint)``: identify's :class:`FitResult`, the
+    effect's parameters (the coefficient within its bounds) and the load without it."""
+    out = []
+    for (q,) in EFFECTS["pressure_friction"].forms:
         law = next(k for k, v in PRESSURE_COEFFICIENT.items() if v == q.name)
         res = identify(preps, rig.cylinder, rig.P_atm, valve=rig.valve, gas=rig.gas, pressure=law)
         found = res.values()
         joint = {k: v for k, v in found.items() if k not in PRESSURE_COEFFICIENT.values() and math.isfinite(v)}
-        fx = {name: {q.name: float(min(max(found[q.name], q.lower), q.upper))}}
-        cost = sum(e * e for e in mean_errors(joint, fx, fit_recs, FIT_RTOL).values())
-        fits.append((cost, fx, joint))
+        out.append((res, {"pressure_friction": {q.name: float(min(max(found[q.name], q.lower), q.upper))}}, joint))
+    return out
+
+
+def _fit_pressure_friction(name, rig, preps, fit_recs, hold_recs):
+    fits = [(sum(e * e for e in mean_errors(joint, fx, fit_recs, FIT_RTOL).values()), fx, joint)
+            for _, fx, joint in _seal_laws(rig, preps)]
     cost, fx, joint = min(fits, key=lambda f: f[0])
     return name, fx, cost, mean_errors(joint, fx, hold_recs), joint
 
@@ -306,27 +312,22 @@ def _friction_told(fit_recs, hold_recs, before: dict):
     rms0 = plain.details.get("velocity_error", {}).get("rms_velocity_m_s", math.nan)
     if not math.isfinite(rms0):
         return None
-    best = None
-    for law, q in PRESSURE_COEFFICIENT.items():
-        res = identify(preps, rig.cylinder, rig.P_atm, valve=rig.valve, gas=rig.gas, pressure=law)
+    told = []
+    for res, fx, joint in _seal_laws(rig, preps):
         rms = res.details.get("velocity_error", {}).get("rms_velocity_m_s", math.inf)
-        c = res.params.get(q)
-        if c is None or not rms <= (1.0 - FRICTION_GAIN) * rms0 or not c.ci95[0] >= FRICTION_CLEAR * c.value > 0.0:
-            continue
-        if best is None or rms < best[0]:
-            best = (rms, q, res.values())
-    if best is None:
+        (q,) = fx["pressure_friction"]
+        c = res.params[q]
+        if rms <= (1.0 - FRICTION_GAIN) * rms0 and c.ci95[0] >= FRICTION_CLEAR * c.value > 0.0:
+            told.append((rms, fx, joint))
+    if not told:
         return None
-    rms, q, found = best
-    bounds = next(p for p in EFFECTS["pressure_friction"].parameters if p.name == q)
-    joint = {k: v for k, v in found.items() if k not in PRESSURE_COEFFICIENT.values() and math.isfinite(v)}
-    fx = {q: float(min(max(found[q], bounds.lower), bounds.upper))}
-    after = mean_errors(joint, {"pressure_friction": fx}, hold_recs)
+    _, fx, joint = min(told, key=lambda t: t[0])
+    after = mean_errors(joint, fx, hold_recs)
     gain = shrink(before, after)
     if not gain > 0.0:
         return None
-    cost = sum(e * e for e in mean_errors(joint, {"pressure_friction": fx}, fit_recs, FIT_RTOL).values())
-    return Candidate("pressure_friction", fx, cost, after, gain, score=1.0, values=joint)
+    cost = sum(e * e for e in mean_errors(joint, fx, fit_recs, FIT_RTOL).values())
+    return Candidate("pressure_friction", fx["pressure_friction"], cost, after, gain, score=1.0, values=joint)
 
 
 def _cost(job) -> int:
@@ -459,7 +460,6 @@ def _pairs(cands, values, fit_recs, hold_recs, before, workers, noise: float = 0
         pool.append(by_fit[0])
     by_name = {c.name: c for c in cands}
     # where the best explains the gap on its own, a pair must hold it (another pair
-    # would have to beat it with two effects the best does not need)
     # would have to beat it with two effects the best does not need), and its partner
     # must show on its own at least half of what it would have to remove beside the
     # best (MIN_SHRINK_SECOND of what the best leaves beyond the noise): a second effect

@@ -187,7 +187,7 @@ def _html(doc: dict, images: list[str]) -> str:
                     "and no candidate effect explains it: no finding.")
     elif verdict == ["unexplained"]:
         headline = "A gap that no candidate effect explains (see where it lies below)."
-    elif not doc.get("gap_beyond_noise") or doc.get("told_by_load_fit"):
+    elif doc.get("told_by_load_fit"):
         headline = ("<b>" + ", ".join(e(v) for v in verdict) + "</b>, told by the load's own fit: the friction "
                     "moves with the chambers' pressure sample by sample (the velocity fit misses the recorded "
                     "velocities less with it), while the outputs' gap "
