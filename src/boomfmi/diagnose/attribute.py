@@ -24,8 +24,8 @@ and p_b.
   Eq. 8 and 9 (:func:`_fit_friction`), so a baseline that absorbed part of the effect
   does not hide it.
 * **Pairs.**  Where no single effect explains the gap, or the best leaves a gap, pairs
-  among the ``PAIR_POOL`` best singles (and the single that fitted the fit recordings
-  best) are fitted jointly (:func:`_pairs`), from the singles' fits or from the
+  among the ``PAIR_POOL`` best singles (and the ``FIT_POOL`` that fitted the fit
+  recordings best) are fitted jointly (:func:`_pairs`), from the singles' fits or from the
   stronger's fit with the other fitted beside it, whichever fits better; each effect
   of a pair must pay for itself (remove ``MIN_SHRINK_SECOND`` of what the other alone
   leaves beyond the holdout's noise floor), so that noise is not explained by a second
@@ -77,6 +77,7 @@ ABS_FLOOR = 0.002
 MIN_SHRINK = 0.35
 MIN_SHRINK_SECOND = 0.4     #: the share of the gap left by the best that a second effect must remove
 PAIR_POOL = 3               #: the candidates among which pairs are tried
+FIT_POOL = 2                #: and those that fitted the fit recordings best, beside them
 SCREEN_POINTS = 4           #: points per parameter that screen an effect's range
 SCREEN = 0.02               #: the share of the fit error a screened point must remove to go on
 PAIR_EVALUATIONS = 24       #: the joint fit of a pair: its simplex's evaluations at most
@@ -452,12 +453,13 @@ def _pairs(cands, values, fit_recs, hold_recs, before, workers, noise: float = 0
     still shows, which no effect can remove)."""
     helped = [c for c in cands if c.shrink > 0.0]
     pool = helped[:PAIR_POOL]
-    # and the one that explained most of the fit recordings, if not already in: an
+    # and the FIT_POOL that explained most of the fit recordings, if not already in: an
     # effect strong in the fit recordings but weak in the holdout is fitted there
-    # (another, absorbing it, may have done better on the holdout alone)
+    # (another, absorbing it, may have done better on the holdout alone), and so is the
+    # runner-up there (a weak effect beside a strong one shows in the fit recordings'
+    # error first: on the holdout, the strong one's misfit may hide it)
     by_fit = sorted(helped, key=lambda c: c.fit_error)
-    if by_fit and by_fit[0] not in pool:
-        pool.append(by_fit[0])
+    pool += [c for c in by_fit[:FIT_POOL] if c not in pool]
     by_name = {c.name: c for c in cands}
     # where the best explains the gap on its own, a pair must hold it (another pair
     # would have to beat it with two effects the best does not need), and its partner
