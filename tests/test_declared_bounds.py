@@ -64,6 +64,8 @@ NO_MAX = {
     ("cylinder", "C_leak"): EFFECT,
     ("cylinder", "A_leak"): EFFECT,
     ("cylinder", "A_cushion"): EFFECT,
+    ("cylinder", "V_cushion_port"): "part of the dead volumes V_a0, V_b0, which have none: refused at "
+                                    "initialisation where it is not smaller",
     ("boom_load", "p_a"): CHAMBER,
     ("boom_load", "p_b"): CHAMBER,
     ("boom_load", "f_ext"): FORCE,

@@ -121,6 +121,35 @@ def test_end_cushioning_throttles_the_exhaust_near_the_stroke_end(fmu):
     assert run(0.01, 0.03) == pytest.approx(run(0.0, 0.03), rel=1e-12)
 
 
+def test_a_cushion_port_cut_off_stiffens_the_closed_chamber_as_the_closed_form(fmu):
+    """A closed chamber A (no flow) driven into the cushion at constant speed: Eq. 7
+    with the port's volume V_p leaving it as the spear enters (separated, not
+    compressed) gives d ln p / dx = -k A_a / V(x), V = A_a x + V_a0 - V_p g(x) piecewise
+    linear in x, so ln(p1/p0) is a sum of logarithms.  Without the port the FMU's step is
+    exact; with it the cut is held over each step, first order in the step."""
+    A, V0, l_c, V_p = reference_rig.A_a, reference_rig.V_a0, 0.01, 6e-6
+    x0, x1, v, dt = 0.015, 0.004, -0.1, 1e-4
+
+    def closed_form(V_p):
+        # pieces of x where V is linear: a x + b
+        pieces = [(l_c, x0, A, V0), (0.8 * l_c, l_c, A + V_p / (0.2 * l_c), V0 - V_p / 0.2),
+                  (x1, 0.8 * l_c, A, V0 - V_p)]
+        return math.exp(sum(-k * A / a * math.log((a * lo + b) / (a * hi + b)) for lo, hi, a, b in pieces))
+
+    def run(V_p):
+        with FmuInstance(fmu("cylinder")) as cyl:
+            cyl.initialize(dict(p_a0=3e5, l_cushion=l_c, A_cushion=1e-7, V_cushion_port=V_p),
+                           inputs=dict(x=x0, v=v, mdot_a=0.0, mdot_b=0.0))
+            n = round((x0 - x1) / (-v * dt))
+            for i in range(n):
+                cyl.set(x=x0 + v * i * dt)
+                cyl.step_to(i * dt, dt)
+            return cyl.get("p_a")["p_a"] / 3e5
+    assert run(0.0) == pytest.approx(closed_form(0.0), rel=1e-9)
+    assert closed_form(V_p) > 1.1 * closed_form(0.0)          # the port's share is no detail
+    assert run(V_p) == pytest.approx(closed_form(V_p), rel=2e-3)
+
+
 def test_sensor_lag_smooths_what_the_bridge_reports(fmu, tmp_path):
     t = np.round(np.arange(0, 0.0505, 1e-3), 6)
     alpha = np.where(t < 0.01, 0.7, 0.8)

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from boomfmi.physics import Load, mass_flow
@@ -51,6 +52,24 @@ def test_stribeck_falls_from_static_to_coulomb():
     assert fx.stribeck_load(load, 0.0, 0.01).F_d == pytest.approx(120.0)
     assert fx.stribeck_load(load, 0.01, 0.01).F_d == pytest.approx(80.0 + 40.0 / math.e)
     assert fx.stribeck_load(load, 1.0, 0.01).F_d == pytest.approx(80.0, abs=1e-9)
+
+
+def test_cushion_port_cut_follows_the_spears_engagement():
+    """The port's volume leaves the chamber as the spear enters: none outside the
+    cushion, all of it past the chamfer (the first fifth of the length), linear between;
+    arrays as floats."""
+    V_p, l_c = 4e-6, 0.01
+    assert fx.cushion_port_cut(0.02, l_c, V_p) == 0.0
+    assert fx.cushion_port_cut(0.01, l_c, V_p) == 0.0
+    assert fx.cushion_port_cut(0.009, l_c, V_p) == pytest.approx(0.5 * V_p, rel=1e-12)
+    assert fx.cushion_port_cut(0.005, l_c, V_p) == V_p
+    assert fx.cushion_port_cut(-1e-4, l_c, V_p) == V_p          # (against the stop)
+    assert fx.cushion_port_cut(0.005, l_c, 0.0) == 0.0          # no port given
+    assert fx.cushion_port_cut(0.005, 0.0, V_p) == 0.0          # no cushion
+    d = np.array([0.02, 0.009, 0.005])
+    assert np.allclose(fx.cushion_port_cut(d, l_c, V_p), [0.0, 0.5 * V_p, V_p], rtol=1e-12, atol=0.0)
+    assert fx.cushion_engagement_slope(0.009, l_c) == pytest.approx(-1.0 / (0.2 * l_c), rel=1e-12)
+    assert fx.cushion_engagement_slope(0.005, l_c) == 0.0
 
 
 def test_cushion_outflow_is_the_series_of_valve_and_needle():

@@ -19,6 +19,7 @@ INVALID = [
     ("cylinder", {"p_a0": 0.0}, "p_a0"),
     ("cylinder", {"l_cushion": 0.05}, "l_cushion"),
     ("cylinder", {"l_cushion": 0.01, "A_cushion": 0.0}, "A_cushion"),
+    ("cylinder", {"l_cushion": 0.01, "V_cushion_port": 1.5e-5}, "V_cushion_port"),   # the whole dead volume
     ("boom_load", {"M": 0.0}, "M"),
     ("boom_load", {"M": -22.7}, "M"),
     ("boom_load", {"L": 0.0}, "L"),

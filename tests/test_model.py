@@ -70,9 +70,11 @@ def test_diagnosis_reads_its_candidates_and_fmu_options_from_the_catalogue(tmp_p
     assert list(CANDIDATES) == list(EFFECTS)
     leak_C, leak_A = ("C", 1e-13, 5e-10, True), ("A", 1e-10, 2e-7, True)
     lag_tau, lag_delay = ("tau", 2e-4, 0.03, True), ("delay", 2e-4, 0.02, True)
+    cushion_l, cushion_A = ("length", 2e-3, 0.02, False), ("A_n", 1e-8, 4e-6, True)
     assert FORMS == {"heat_transfer": [[("h", 1.0, 2000.0, True)], [("n", 1.0, 1.4, False)]],
                      "piston_leakage": [[leak_C], [leak_A], [leak_C, leak_A]],
                      "sensor_lag": [[lag_tau], [lag_tau, lag_delay]],
+                     "end_cushioning": [[cushion_l, cushion_A], [cushion_l, cushion_A, ("V_p", 3e-7, 1.2e-5, True)]],
                      "pressure_friction": [[(c, 1e-7, 2e-4, True)] for c in ("c_sum", "c_max", "c_diff")]}
     data = run_offline({"seed": 1}, random_steps(1, duration=0.2), 0.2)
     rec = Recording(tmp_path / "r.csv", data)
@@ -84,11 +86,14 @@ def test_diagnosis_reads_its_candidates_and_fmu_options_from_the_catalogue(tmp_p
 
 
 def test_options_switch_effects_on_only_when_a_switching_parameter_is_set():
-    off = {"h_wall": 0.0, "n_poly": 0.0, "C_leak": 0.0, "A_leak": 0.0, "l_cushion": 0.0, "A_cushion": 1e-7}
-    assert effects_from_options("cylinder", off) == {}
+    off = {"h_wall": 0.0, "n_poly": 0.0, "C_leak": 0.0, "A_leak": 0.0, "l_cushion": 0.0, "A_cushion": 1e-7,
+           "V_cushion_port": 4e-6}
+    assert effects_from_options("cylinder", off) == {}          # a port's volume alone switches nothing on
     on = dict(off, A_leak=1e-8, l_cushion=0.01)
     assert effects_from_options("cylinder", on) == {"piston_leakage": {"C": 0.0, "A": 1e-8},
-                                                    "end_cushioning": {"length": 0.01, "A_n": 1e-7}}
+                                                    "end_cushioning": {"length": 0.01, "A_n": 1e-7, "V_p": 4e-6}}
+    with pytest.raises(ph.ParameterError, match="effects.end_cushioning.V_p"):
+        Model(effects={"end_cushioning": {"length": 0.01, "A_n": 1e-7, "V_p": 2e-5}}).check()
     with pytest.raises(ph.ParameterError, match="not an effect"):
         Model(effects={"wall_stiction": {}}).check()
     with pytest.raises(ph.ParameterError, match="effects.valve_dynamics"):

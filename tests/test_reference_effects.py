@@ -16,10 +16,12 @@ CASES = [
     ("piston_leakage", {"A": 1e-7}, {"cylinder.A_leak": 1e-7}),
     ("end_cushioning", {"length": 0.01, "A_n": 1e-7},
      {"cylinder.l_cushion": 0.01, "cylinder.A_cushion": 1e-7}),
+    ("end_cushioning", {"length": 0.01, "A_n": 1e-7, "V_p": 8e-6},
+     {"cylinder.l_cushion": 0.01, "cylinder.A_cushion": 1e-7, "cylinder.V_cushion_port": 8e-6}),
 ]
 
 
-@pytest.mark.parametrize("name, params, ssp_params", CASES, ids=[c[0] for c in CASES])
+@pytest.mark.parametrize("name, params, ssp_params", CASES, ids=[f"{c[0]}-{'-'.join(c[1])}" for c in CASES])
 def test_reference_with_an_effect_matches_the_cosimulation_with_that_option(ssp_path, name, params, ssp_params):
     prof = paper_multistep()
     stop = 4.5

@@ -15,7 +15,8 @@ chamber's air exchange heat with its wall, relaxing the pressure towards the iso
 pressure of its air mass (which the FMU then tracks) with time constant
 m c_v / (h_wall A_wall) (heat_transfer); ``l_cushion`` > 0 makes a chamber's outflow
 within that distance of its end of stroke also pass the cushion needle of area
-``A_cushion`` to the exhaust (end_cushioning; DSNU-PPVA).
+``A_cushion`` to the exhaust (end_cushioning; DSNU-PPVA), and ``V_cushion_port`` > 0
+cuts that port's volume off the chamber's dead volume there (the sensed chamber is stiffer).
 """
 from boomfmi_cylinder_lib.fmislave import (CYLINDER, L_MAX, P_S_MAX, BoomSlave, effect_options, input,
                                           option_values, output, parameter, rig_parameters)
@@ -61,6 +62,10 @@ class Cylinder(BoomSlave):
             for name in ("A_cushion", "P_e"):
                 if not getattr(self, name) > 0.0:
                     raise ParameterError(name, getattr(self, name), "must be > 0 with the cushion on (l_cushion > 0)")
+            if self.V_cushion_port >= min(self.V_a0, self.V_b0):
+                raise ParameterError("V_cushion_port", self.V_cushion_port,
+                                     f"the cushion's port is part of the dead volume: it must be smaller than "
+                                     f"V_a0 and V_b0 ({min(self.V_a0, self.V_b0):g} m^3)")
         for name in ("p_a0", "p_b0"):
             if not getattr(self, name) > 0.0:
                 raise ParameterError(name, getattr(self, name), "an absolute pressure must be > 0")

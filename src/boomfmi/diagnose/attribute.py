@@ -7,10 +7,13 @@ on the holdout recordings, which are never fitted on:
 and p_b.
 
 * **Laws.**  Where a mechanism has more than one law (a seal that leaks laminar,
-  turbulent or both; a sensor path with a lag, or a dead time and a lag), each is
-  screened over its range and the one that screens best on the fit recordings is
-  fitted; a law that holds another's parameters and more is screened only where the
-  smaller one explains something.
+  turbulent or both; a sensor path with a lag, or a dead time and a lag; a cushion
+  with or without its port cut off the sensed chamber), each is screened over its
+  range and the one that screens best on the fit recordings is fitted; a law that
+  holds another's parameters and more is grown from that one's fit, where it explains
+  something: its further parameters screened beside it, then all refined together,
+  kept where it fits better (a three-parameter screen is too coarse to find the
+  cushion's narrow valley).
 * **Fits.**  An effect's parameters are fitted by output error of the whole model (the
   monolithic reference with the effect on, ``compare.simulate_recording``), each
   channel's residual over its range.  Its range is screened first
@@ -81,6 +84,7 @@ FIT_POOL = 2                #: and those that fitted the fit recordings best, be
 SCREEN_POINTS = 4           #: points per parameter that screen an effect's range
 SCREEN = 0.02               #: the share of the fit error a screened point must remove to go on
 PAIR_EVALUATIONS = 24       #: the joint fit of a pair: its simplex's evaluations at most
+GROW_EVALUATIONS = 30       #: and of a law grown by further parameters from a narrower law's fit
 FRICTION_GAIN = 0.03   #: the share by which a seal-pressure law must lower the load's velocity misfit
 FRICTION_CLEAR = 0.25  #: and how far its coefficient's interval keeps from zero (its lower end / value)
 RTOL = 1e-5            #: the reference solver's tolerance when scoring
@@ -213,19 +217,27 @@ def _fit_and_score(args):
     name, values, fit_recs, hold_recs, fixed, base_cost = args
     if EFFECTS[name].stage == "friction" and not fixed:
         return _fit_friction(name, fit_recs, hold_recs)
-    screens = []
-    for form in FORMS.get(name, [CANDIDATES[name]]):
-        # a law that holds another's parameters and more (a leak both laminar and
-        # turbulent) is tried only where a law it holds explains something
-        subsets = [f for f in screens if set(f[2]) < {q[0] for q in form}]
-        if subsets and not any(f[1] <= (1.0 - SCREEN) * base_cost for f in subsets):
-            continue
-        fx, cost = fit_effects([name], values, fit_recs, fixed=fixed, forms={name: form}, screen_only=True)
-        screens.append((fx, cost, [q[0] for q in form], form))
-    # every law screened, the one that screens best refined
-    fx, cost, _, form = min(screens, key=lambda f: f[1])
+    forms = FORMS.get(name, [CANDIDATES[name]])
+    laws = lambda form: {q[0] for q in form}
+    # every law that holds no other's parameters screened, the one that screens best
+    # refined; then a law that holds its parameters and more (a leak both laminar and
+    # turbulent, a cushion with its port's volume) grown from that fit: its further
+    # parameters screened beside it, then all refined together, kept where it fits better
+    simple = [f for f in forms if not any(laws(g) < laws(f) for g in forms)]
+    screens = [(*fit_effects([name], values, fit_recs, fixed=fixed, forms={name: form}, screen_only=True), form)
+               for form in simple]
+    fx, cost, form = min(screens, key=lambda f: f[1])
     fx, cost = fit_effects([name], values, fit_recs, fixed=fixed, forms={name: form}, baseline_cost=base_cost,
                            screened=(fx, cost))
+    if cost <= (1.0 - SCREEN) * base_cost:
+        for wider in (f for f in forms if laws(form) < laws(f)):
+            more = [q for q in wider if q[0] not in laws(form)]
+            held, _ = fit_effects([name], values, fit_recs, fixed={**(fixed or {}), name: fx[name]},
+                                  forms={name: more}, screen_only=True)
+            fx_w, cost_w = fit_effects([name], values, fit_recs, start=held, fixed=fixed, forms={name: wider},
+                                       max_evaluations=GROW_EVALUATIONS)
+            if cost_w < cost:
+                fx, cost = fx_w, cost_w
     return name, fx, cost, mean_errors(values, fx, hold_recs), None
 
 

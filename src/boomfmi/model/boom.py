@@ -58,6 +58,11 @@ class Model:
         ph.check_cylinder(self.cylinder)
         ph.check_load(self.load)
         ph.check_geometry(self.geometry, self.cylinder.L)
+        V_p = _param(self.effects, "end_cushioning", "V_p")
+        if V_p >= min(self.cylinder.V_a0, self.cylinder.V_b0):
+            raise ph.ParameterError("effects.end_cushioning.V_p", V_p,
+                                    f"the cushion's port must be smaller than the dead volumes V_a0, V_b0 "
+                                    f"({self.cylinder.V_a0:g}, {self.cylinder.V_b0:g} m^3) it is part of")
 
 
 def check_effects(effects: dict) -> None:
@@ -109,6 +114,9 @@ class Boom:
         self.tau_sensor = _param(on, "sensor_lag", "tau")
         self.delay_sensor = _param(on, "sensor_lag", "delay")
         self.bore = math.sqrt(4.0 * self.cylinder.A_a / math.pi)   #: for the wall's area [m]
+        self.l_cushion = _param(on, "end_cushioning", "length")
+        #: end_cushioning's port volume [m^3], cut off the chamber within the cushion (0: none)
+        self.V_port = _param(on, "end_cushioning", "V_p") if self.l_cushion > 0.0 else 0.0
 
     # ------------------------------------------------------------------ valve
     def spool_step(self, y: float, u: float, dt: float) -> float:
@@ -149,12 +157,51 @@ class Boom:
         """:meth:`valve_flows` through :meth:`inflows`."""
         return self.inflows(*self.valve_flows(cmd, p_a, p_b, slopes), p_a, p_b, x)
 
+    def cut(self, x: float):
+        """The volumes [m^3] cut off chambers A and B at piston position ``x`` [m]: an end
+        cushion's port within the cushion (``effects.cushion_port_cut``; 0 without)."""
+        if self.V_port <= 0.0:
+            return 0.0, 0.0
+        return (fx.cushion_port_cut(x, self.l_cushion, self.V_port),
+                fx.cushion_port_cut(self.cylinder.L - x, self.l_cushion, self.V_port))
+
+    def volumes(self, x: float, cut=None):
+        """The chambers' air volumes ``(V_a, V_b)`` [m^3] at piston position ``x`` [m]
+        (Eq. 6, less :meth:`cut`; ``cut``: the cut to take instead, e.g. a step's start's)."""
+        V_a, V_b = ph.chamber_volumes(x, self.cylinder)
+        if self.V_port <= 0.0:
+            return V_a, V_b
+        c_a, c_b = self.cut(x) if cut is None else cut
+        return V_a - c_a, V_b - c_b
+
     def air_masses(self, p_a: float, p_b: float, x: float):
         """The chambers' air masses [kg] at absolute pressures [Pa] and position ``x``, at
         the gas's temperature (Eq. 4)."""
-        V_a, V_b = ph.chamber_volumes(x, self.cylinder)
+        V_a, V_b = self.volumes(x)
         RT = self.gas.R * self.gas.T
         return p_a * V_a / RT, p_b * V_b / RT
+
+    def air_mass_rates(self, m_a: float, m_b: float, x: float, v: float, masses):
+        """d/dt of the chambers' air ``masses`` [kg/s]: the inflows ``m_a``, ``m_b``
+        [kg/s], less the air an end cushion's port takes with it as the spear enters
+        (the chamber's density times the cut's rate; the piston at ``x`` [m] moving at
+        ``v`` [m/s])."""
+        if self.V_port <= 0.0:
+            return m_a, m_b
+        V_a, V_b = self.volumes(x)
+        l_c, V_p, L = self.l_cushion, self.V_port, self.cylinder.L
+        dcut_a = V_p * fx.cushion_engagement_slope(x, l_c) * v
+        dcut_b = -V_p * fx.cushion_engagement_slope(L - x, l_c) * v
+        return m_a - masses[0] / V_a * dcut_a, m_b - masses[1] / V_b * dcut_b
+
+    def separate(self, masses, x0: float, x1: float) -> None:
+        """Scale the chambers' air ``masses`` [kg] (in place) for the cut's change from
+        ``x0`` to ``x1`` [m]: the port's air leaves the chamber's account at its density."""
+        if self.V_port <= 0.0:
+            return
+        start = self.cut(x0)
+        for i, (V_kept, V_now) in enumerate(zip(self.volumes(x1), self.volumes(x1, start))):
+            masses[i] *= V_kept / V_now
 
     def step_chambers(self, p_a: float, p_b: float, x0: float, x1: float, m_a: float, m_b: float,
                       s_a: float, s_b: float, dt: float, masses=None):
@@ -165,8 +212,10 @@ class Boom:
         in place, and each pressure relaxes towards its isothermal level.  Returns
         ``(p_a, p_b)``."""
         cyl, gas = self.cylinder, self.chamber_gas
-        V_a0, V_b0 = ph.chamber_volumes(x0, cyl)
-        V_a1, V_b1 = ph.chamber_volumes(x1, cyl)
+        # an end cushion's cut held over the step (it separates air, not compresses it)
+        start = self.cut(x0)
+        V_a0, V_b0 = self.volumes(x0, start)
+        V_a1, V_b1 = self.volumes(x1, start)
         p_a1 = ph.chamber_pressure_step(p_a, V_a0, V_a1, m_a, dt, gas, s_a)
         p_b1 = ph.chamber_pressure_step(p_b, V_b0, V_b1, m_b, dt, gas, s_b)
         if self.h_wall > 0.0:
@@ -177,6 +226,9 @@ class Boom:
             p_b1 += dt * fx.outflow_temperature_rate(p_b, masses[1], V_b0, m_b, k, R, T)
             masses[0] += dt * (m_a + 0.5 * s_a * (p_a1 - p_a))
             masses[1] += dt * (m_b + 0.5 * s_b * (p_b1 - p_b))
+            if self.V_port > 0.0:
+                self.separate(masses, x0, x1)
+                V_a1, V_b1 = self.volumes(x1)
             tau = fx.thermal_time_constant(masses[0], fx.chamber_wall_area(V_a1, cyl.A_a, self.bore), h, k, R)
             p_a1 = fx.thermal_relaxation_step(p_a1, masses[0], V_a1, dt, tau, R, T)
             tau = fx.thermal_time_constant(masses[1], fx.chamber_wall_area(V_b1, cyl.A_b, self.bore), h, k, R)
@@ -187,10 +239,10 @@ class Boom:
                        masses=None):
         """dp_a/dt, dp_b/dt [Pa/s] (Eq. 5 to 7), with heat_transfer's relaxation towards
         the isothermal pressure of the air ``masses`` [kg] where it is on."""
-        dp_a, dp_b = ph.pressure_rates(p_a, p_b, m_a, m_b, x, v, self.cylinder, self.chamber_gas)
+        dp_a, dp_b = ph.pressure_rates(p_a, p_b, m_a, m_b, x, v, self.cylinder, self.chamber_gas, self.cut(x))
         if self.h_wall > 0.0:
             cyl, (k, R, T) = self.cylinder, self.gas
-            V_a, V_b = ph.chamber_volumes(x, cyl)
+            V_a, V_b = self.volumes(x)
             m = masses[0]
             tau = fx.thermal_time_constant(max(m, 1e-12), fx.chamber_wall_area(V_a, cyl.A_a, self.bore), self.h_wall, k, R)
             dp_a += fx.thermal_relaxation_rate(p_a, m, V_a, tau, R, T) + fx.outflow_temperature_rate(p_a, m, V_a, m_a, k, R, T)

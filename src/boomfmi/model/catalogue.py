@@ -124,6 +124,11 @@ _C_LEAK = _p("C", "kg/(s.Pa)", 1e-13, 5e-10, True, "C_leak",
 _A_LEAK = _p("A", "m2", 1e-10, 2e-7, True, "A_leak",
              "piston_leakage: area of a turbulent leak gap across the piston seal (orifice law); 0: off")
 
+_CUSHION_LENGTH = _p("length", "m", 2e-3, 0.02, False, "l_cushion",
+                     "end_cushioning: cushion length at each end of stroke (at most L/2); 0: off", max=L_MAX / 2)
+_CUSHION_AREA = _p("A_n", "m2", 1e-8, 4e-6, True, "A_cushion",
+                   "end_cushioning: cushion needle's orifice area", start=1e-7, switch=False)
+
 #: name -> :class:`Effect`, in the order of ``effects.md``
 EFFECTS = {e.name: e for e in (
     Effect("valve_dynamics", "valve", "spool",
@@ -154,12 +159,16 @@ EFFECTS = {e.name: e for e in (
                 "stribeck_friction: Stribeck velocity of exp(-|v|/v_s); 0: off (the paper's step)"),),),
            "Coulomb level F_d + (F_s - F_d) exp(-|v| / v_s)", _stribeck),
     Effect("end_cushioning", "cylinder", "port",
-           ((_p("length", "m", 2e-3, 0.02, False, "l_cushion",
-                "end_cushioning: cushion length at each end of stroke (at most L/2); 0: off", max=L_MAX / 2),
-             _p("A_n", "m2", 1e-8, 4e-6, True, "A_cushion",
-                "end_cushioning: cushion needle's orifice area", start=1e-7, switch=False)),),
+           ((_CUSHION_LENGTH, _CUSHION_AREA),
+            (_CUSHION_LENGTH, _CUSHION_AREA,
+             _p("V_p", "m3", 3e-7, 1.2e-5, True, "V_cushion_port",
+                "end_cushioning: the port's volume (part of the dead volume, between the cushion's "
+                "spear and the valve), cut off the chamber within the cushion; 0: none",
+                switch=False))),
            "within length of a chamber's end, its outflow also passes the cushion needle "
-           "(area A_n, to the exhaust) in series with the valve; inflow passes freely",
+           "(area A_n, to the exhaust) in series with the valve; inflow passes freely (the check "
+           "valve); where the port's volume V_p is given, the chamber the sensor reads is left "
+           "without it within the cushion, whichever fits",
            _cushion),
     Effect("pressure_friction", "boom_load", "friction",
            ((_p("c_sum", "N/Pa", 1e-7, 2e-4, True, "c_friction_sum",

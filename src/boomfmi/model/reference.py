@@ -64,15 +64,16 @@ def rhs(boom: Boom, layout: Layout, u: float, f_ext: float, mode: int, y) -> lis
     mdot_a, mdot_b = ph.chamber_flows(cmd, p_a, p_b, boom.valve, boom.gas)
     if boom.inflow_effects:
         mdot_a, mdot_b, _, _ = boom.inflows(mdot_a, mdot_b, None, None, p_a, p_b, x)
-    if i_m is None:
+    if i_m is None and boom.V_port <= 0.0:
         dp_a, dp_b = ph.pressure_rates(p_a, p_b, mdot_a, mdot_b, x, v, boom.cylinder, boom.chamber_gas)
     else:
-        dp_a, dp_b = boom.pressure_rates(p_a, p_b, mdot_a, mdot_b, x, v, (y[i_m], y[i_m + 1]))
+        dp_a, dp_b = boom.pressure_rates(p_a, p_b, mdot_a, mdot_b, x, v,
+                                         (y[i_m], y[i_m + 1]) if i_m is not None else None)
     extra = []
     if i_y is not None:
         extra.append(boom.spool_rate(y[i_y], u))
     if i_m is not None:
-        extra += [mdot_a, mdot_b]
+        extra += list(boom.air_mass_rates(mdot_a, mdot_b, x, v, (y[i_m], y[i_m + 1])))
     if mode == 0:
         return [dp_a, dp_b, 0.0, 0.0, *extra]
     phi = ph.phi_from_x(x, boom.geometry)

@@ -16,14 +16,17 @@ def chamber_volumes(x, cyl: Cylinder = Cylinder()):
 
 
 def pressure_rates(p_a, p_b, mdot_a, mdot_b, x, v, cyl: Cylinder = Cylinder(),
-                   gas: Gas = Gas()):
+                   gas: Gas = Gas(), cut=(0.0, 0.0)):
     """Chamber pressure rates ``(dp_a/dt, dp_b/dt)`` [Pa/s] (Eq. 7).
 
     ``p_a``, ``p_b`` absolute [Pa]; ``mdot_a``, ``mdot_b`` into each chamber [kg/s];
-    piston position ``x`` [m] and velocity ``v`` [m/s], positive extending.
+    piston position ``x`` [m] and velocity ``v`` [m/s], positive extending.  ``cut``:
+    the volumes [m^3] cut off each chamber's dead volume (an end cushion's port,
+    ``effects.cushion_port_cut``), whose change separates air and compresses none.
     """
     k, R, T = gas
     V_a, V_b = chamber_volumes(x, cyl)
+    V_a, V_b = V_a - cut[0], V_b - cut[1]
     dp_a = (k * R * T * mdot_a - k * p_a * cyl.A_a * v) / V_a
     dp_b = (k * R * T * mdot_b + k * p_b * cyl.A_b * v) / V_b
     return dp_a, dp_b

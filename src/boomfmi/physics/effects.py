@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from . import _xp as xp
 from .lag import first_order_step
 from .orifice import signed_mass_flow, signed_mass_flow_slope
@@ -184,10 +186,46 @@ def _cushion(mdot: float, p: float, distance: float, length: float, A_n: float, 
              gas: Gas):
     """The spear's engagement g [1] and the needle's flow into the chamber [kg/s] and its
     slope in ``p`` [kg/(s Pa)], where the cushion acts on ``mdot``; else None."""
-    if length <= 0.0 or mdot >= 0.0 or distance >= length:
+    if mdot >= 0.0:
         return None
-    engaged = min(1.0, (length - max(distance, 0.0)) / (0.2 * length))
+    engaged = cushion_engagement(distance, length)
+    if engaged <= 0.0:
+        return None
     return engaged, signed_mass_flow(A_n, P_e, p, gas), signed_mass_flow_slope(A_n, P_e, p, gas)
+
+
+def cushion_engagement(distance, length: float):
+    """How far the cushion spear has entered its bore [1]: 0 at ``distance`` [m] from
+    the chamber's end of stroke at or beyond ``length`` [m], rising linearly to 1 over
+    the first fifth of ``length`` (the spear's chamfer), 1 closer to the end.
+    ``length <= 0``: 0 (no cushion).  ``distance`` may be an array."""
+    if length <= 0.0:
+        return np.zeros_like(distance) if isinstance(distance, np.ndarray) else 0.0
+    return np.clip((length - np.maximum(distance, 0.0)) / (0.2 * length), 0.0, 1.0) \
+        if isinstance(distance, np.ndarray) else min(1.0, max(0.0, (length - max(distance, 0.0)) / (0.2 * length)))
+
+
+def cushion_engagement_slope(distance: float, length: float) -> float:
+    """d(:func:`cushion_engagement`)/d(distance) [1/m]: ``-1 / (0.2 length)`` on the
+    spear's chamfer, else 0."""
+    if length <= 0.0 or not 0.8 * length < distance < length:
+        return 0.0
+    return -1.0 / (0.2 * length)
+
+
+def cushion_port_cut(distance, length: float, V_p: float):
+    """The volume [m^3] a cushion cuts off a chamber's dead volume at ``distance`` [m]
+    from its end of stroke: its port ``V_p`` [m^3] (the bore between the spear and the
+    valve, part of the dead volume V_0 of Eq. 6) times the spear's engagement
+    (:func:`cushion_engagement`).  Within the cushion the chamber, which the pressure
+    sensor reads, is left with ``A x + V_0 - V_p``: it is stiffer, and the port's air
+    reaches the valve without passing the needle (its pressure follows the valve's
+    quasi-statically: the series restriction of :func:`cushion_outflow`).  The cut
+    separates air, it does not compress it: the chamber's pressure is continuous as the
+    spear enters, and only its air's volume and mass are smaller.  ``V_p <= 0``: 0."""
+    if V_p <= 0.0:
+        return 0.0 * distance
+    return V_p * cushion_engagement(distance, length)
 
 
 def cushion_outflow(mdot: float, p: float, distance: float, length: float, A_n: float,
