@@ -10,10 +10,11 @@ and p_b.
   turbulent or both; a sensor path with a lag, or a dead time and a lag; a cushion
   with or without its port cut off the sensed chamber), each is screened over its
   range and the one that screens best on the fit recordings is fitted; a law that
-  holds another's parameters and more is grown from that one's fit, where it explains
-  something: its further parameters screened beside it, then all refined together,
-  kept where it fits better (a three-parameter screen is too coarse to find the
-  cushion's narrow valley).
+  holds another's parameters and more is grown from that one's fit, where it removes
+  ``GROW`` of the fit error (an effect that barely shows cannot tell its shape): its
+  further parameters screened beside it, then all refined together, kept where it
+  fits better (a three-parameter screen is too coarse to find the cushion's narrow
+  valley).
 * **Fits.**  An effect's parameters are fitted by output error of the whole model (the
   monolithic reference with the effect on, ``compare.simulate_recording``), each
   channel's residual over its range.  Its range is screened first
@@ -85,6 +86,7 @@ SCREEN_POINTS = 4           #: points per parameter that screen an effect's rang
 SCREEN = 0.02               #: the share of the fit error a screened point must remove to go on
 PAIR_EVALUATIONS = 24       #: the joint fit of a pair: its simplex's evaluations at most
 GROW_EVALUATIONS = 30       #: and of a law grown by further parameters from a narrower law's fit
+GROW = 0.1                  #: the share of the fit error the narrower law must remove to be grown
 FRICTION_GAIN = 0.03   #: the share by which a seal-pressure law must lower the load's velocity misfit
 FRICTION_CLEAR = 0.25  #: and how far its coefficient's interval keeps from zero (its lower end / value)
 RTOL = 1e-5            #: the reference solver's tolerance when scoring
@@ -229,7 +231,7 @@ def _fit_and_score(args):
     fx, cost, form = min(screens, key=lambda f: f[1])
     fx, cost = fit_effects([name], values, fit_recs, fixed=fixed, forms={name: form}, baseline_cost=base_cost,
                            screened=(fx, cost))
-    if cost <= (1.0 - SCREEN) * base_cost:
+    if cost <= (1.0 - GROW) * base_cost:     # (an effect that barely shows cannot tell its law's shape)
         for wider in (f for f in forms if laws(form) < laws(f)):
             more = [q for q in wider if q[0] not in laws(form)]
             held, _ = fit_effects([name], values, fit_recs, fixed={**(fixed or {}), name: fx[name]},
