@@ -118,8 +118,12 @@ def resolution(x_raw: np.ndarray) -> float:
     return float(np.percentile(steps, 5)) if len(steps) else 1e-5
 
 
-#: Cut-off [Hz] of the filter the mode classification smooths the position with.
-MODE_CUTOFF = 20.0
+#: Cut-off [Hz] of the filter the mode classification smooths the position with.  The
+#: zero-phase filter spreads each stop and start over about 1 / (2 MODE_CUTOFF); what it
+#: spreads into the sticking samples beside a run is taken for sliding at F_d (20 Hz:
+#: 25 ms, F_d low and M high, the bucket's F_d by 5 %, docs/excavator.md).  The speed that
+#: counts as motion rises with it on a coarse sensor (:func:`motion_modes`).
+MODE_CUTOFF = 40.0
 
 
 @dataclass
