@@ -27,7 +27,7 @@ def _err(result, truth, name):
 
 
 @pytest.mark.parametrize("name", ["K_v_swing", "F_d_swing", "K_v_boom", "F_d_boom", "K_v_arm", "F_d_arm",
-                                  "F_s_swing", "F_s_arm", "K_v_bucket", "payload"])
+                                  "F_s_swing", "F_s_arm", "K_v_bucket", "F_d_bucket", "F_s_bucket", "payload"])
 def test_identified_within_5_percent(identified, name):
     result, truth = identified
     assert _err(result, truth, name) < 0.05, (name, result.params[name], truth[name])
@@ -35,13 +35,11 @@ def test_identified_within_5_percent(identified, name):
     assert lo < result.params[name].value < hi
 
 
-@pytest.mark.xfail(strict=True, reason="measured F_d_bucket -5.2 % (the equation error puts it 4 to 5 % low on "
-                                       "every excitation seed tried, with ideal sensors too: the stick/slip "
-                                       "classification's 25 ms spread at each turn counts sticking samples as "
-                                       "sliding, see docs/excavator.md); from the starts F_s_boom +14.2 % (+0.6 "
-                                       "and +2.2 % on the benchmark's other two seeds) and F_s_bucket +13.9 % "
-                                       "(+4.8, +12.3 %)")
-@pytest.mark.parametrize("name", ["F_d_bucket", "F_s_boom", "F_s_bucket"])
+@pytest.mark.xfail(strict=True, reason="measured F_s_boom +14.5 % on this seed (+6.3 and +7.2 % on the "
+                                       "benchmark's other two seeds), its interval holding the truth and identify "
+                                       "warning that the starts put it anywhere in it: the boom's starts are fast, "
+                                       "see docs/excavator.md")
+@pytest.mark.parametrize("name", ["F_s_boom"])
 def test_identified_within_5_percent_not_yet(identified, name):
     result, truth = identified
     assert _err(result, truth, name) < 0.05
