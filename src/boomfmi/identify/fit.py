@@ -393,6 +393,13 @@ def velocity_error(all_runs: list[Motion], start: dict, n_boot: int = 300, seed:
 #: A start is a run after at least REST_BEFORE [s] of rest; the instant it starts is
 #: looked for from START_BACK [s] before the run is seen to START_AFTER after it.
 REST_BEFORE = 0.03
+#: Cut-off [Hz] of the zero-phase filter of the pressures whose force a start must reach.
+#: At the other stages' 25 Hz the filter smears the valve step's corner (flat, then a
+#: fast rise) back in time: the force seems to reach each level early, and F_s came out
+#: 5 % high wherever a start follows a step closely; a higher cut-off lets more of the
+#: noise's peaks into the running maximum that a start must pass (early again).  60 Hz
+#: of 25, 60 and 100 Hz tried on benchmarks/identification.py and the excavator's.
+START_CUTOFF = 60.0
 SETTLE = 0.02
 START_BACK = 0.15
 START_AFTER = 0.06
@@ -445,11 +452,14 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
     events, lower = [], 0.0
     for ri, r in enumerate(motions):
         p = r.p
-        # the static level the drive force needs at each sample, in the run's direction
-        # (from the filtered pressures: the running maximum below would pick the
-        # noise's peaks and see every start early)
-        F_drive = ph.piston_force(p.p_a, p.p_b, cyl, P_atm) - F_L * np.sin(p.phi)
-        level = F_drive / np.cos(p.phi)
+        # the static level the drive force needs at each sample (a start's: in the
+        # run's direction, from the pressures filtered at START_CUTOFF: unfiltered, the
+        # running maximum below would pick the noise's peaks; at the other stages' 25 Hz,
+        # the filter smears the valve step's corner back before the start)
+        fc = min(START_CUTOFF, 0.4 * p.fs)
+        level_start = (ph.piston_force(lowpass(p.p_a_raw, p.fs, fc), lowpass(p.p_b_raw, p.fs, fc), cyl, P_atm)
+                       - F_L * np.sin(p.phi)) / np.cos(p.phi)
+        level = (ph.piston_force(p.p_a, p.p_b, cyl, P_atm) - F_L * np.sin(p.phi)) / np.cos(p.phi)
         raised = c * fx.seal_pressure(p.p_a, p.p_b, P_atm, pressure) if c else 0.0   # the seals' share
         # the largest drive force held at rest in mid-stroke (away from the last
         # samples before a start): a lower bound of F_s
@@ -464,7 +474,7 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
             smooth = median_filter(level, size=int(0.02 * p.fs) | 1, mode="nearest")   # local: no reach into a start
             lower = max(lower, float(np.max((np.abs(smooth) - raised)[held])))
         for j, i0, ie, d, i1 in _starts(r):
-            need = d * level[j:ie] - (raised[j:ie] if c else 0.0)
+            need = d * level_start[j:ie] - (raised[j:ie] if c else 0.0)
             rest = p.x_raw[j:max(j + 1, i0 - int(0.01 * p.fs))]
             q = _quantum(p.x_raw[j:min(len(p.x_raw), ie + int(0.05 * p.fs))])
             events.append(dict(need=need, n=ie - j, r=r, j=j, ie=ie, d=d, t=float(p.t[i0]),
