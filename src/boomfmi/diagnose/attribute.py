@@ -433,7 +433,7 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
         # than the noise (the baseline's spread no longer counts: the best's fit has
         # moved the model off the baseline already)
         if best.shrink < MIN_SHRINK or sum(best.holdout.values()) > NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR:
-            pair = _pairs(cands, values, fit_recs, hold_recs, before, workers, sum(noise.values()))
+            pair = _pairs(cands, values, fit_recs, hold_recs, before, workers, sum(noise.values()), base_cost)
         if pair is not None:
             pair.score = round(min(1.0, pair.shrink / MIN_SHRINK), 4)
             verdict = pair.name.split("+")
@@ -453,11 +453,12 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     return att
 
 
-def _pairs(cands, values, fit_recs, hold_recs, before, workers, noise: float = 0.0):
+def _pairs(cands, values, fit_recs, hold_recs, before, workers, noise: float = 0.0,
+           base_cost: float | None = None):
     """The best pair of effects, where no single one explains the gap or the best leaves
     one beyond the noise.  Pairs are drawn among the PAIR_POOL candidates that helped
     most on the holdout on their own (not only beside the best: two effects may each
-    explain too little alone), and the one that fitted the fit recordings best (an
+    explain too little alone), and the FIT_POOL that fitted the fit recordings best (an
     effect strong in the fit recordings and weak in the holdout), fitted jointly
     (:func:`_fit_pair`).  A pair is kept only if it
     removes MIN_SHRINK of the gap and each of its effects pays for itself: removes at
@@ -471,9 +472,11 @@ def _pairs(cands, values, fit_recs, hold_recs, before, workers, noise: float = 0
     # effect strong in the fit recordings but weak in the holdout is fitted there
     # (another, absorbing it, may have done better on the holdout alone), and so is the
     # runner-up there (a weak effect beside a strong one shows in the fit recordings'
-    # error first: on the holdout, the strong one's misfit may hide it)
-    by_fit = sorted(helped, key=lambda c: c.fit_error)
-    pool += [c for c in by_fit[:FIT_POOL] if c not in pool]
+    # error first).  Among those that lower that error by SCREEN (``base_cost``: the
+    # baseline's), whatever they do to the holdout alone, where the strong one's
+    # misfit may bury them: the pair must still pay on the holdout.
+    showed = [c for c in cands if c.fit_error <= (1.0 - SCREEN) * base_cost] if base_cost else helped
+    pool += [c for c in sorted(showed, key=lambda c: c.fit_error)[:FIT_POOL] if c not in pool]
     by_name = {c.name: c for c in cands}
     # where the best explains the gap on its own, a pair must hold it (another pair
     # would have to beat it with two effects the best does not need), and its partner
