@@ -457,10 +457,11 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
         # running maximum below would pick the noise's peaks; at the other stages' 25 Hz,
         # the filter smears the valve step's corner back before the start)
         fc = min(START_CUTOFF, 0.4 * p.fs)
-        level_start = (ph.piston_force(lowpass(p.p_a_raw, p.fs, fc), lowpass(p.p_b_raw, p.fs, fc), cyl, P_atm)
-                       - F_L * np.sin(p.phi)) / np.cos(p.phi)
+        p_a_start, p_b_start = lowpass(p.p_a_raw, p.fs, fc), lowpass(p.p_b_raw, p.fs, fc)
+        level_start = (ph.piston_force(p_a_start, p_b_start, cyl, P_atm) - F_L * np.sin(p.phi)) / np.cos(p.phi)
         level = (ph.piston_force(p.p_a, p.p_b, cyl, P_atm) - F_L * np.sin(p.phi)) / np.cos(p.phi)
         raised = c * fx.seal_pressure(p.p_a, p.p_b, P_atm, pressure) if c else 0.0   # the seals' share
+        raised_start = c * fx.seal_pressure(p_a_start, p_b_start, P_atm, pressure) if c else 0.0
         # the largest drive force held at rest in mid-stroke (away from the last
         # samples before a start): a lower bound of F_s
         # (a rest within STOP_ZONE of the stops, or of the extremes the recording
@@ -474,7 +475,7 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
             smooth = median_filter(level, size=int(0.02 * p.fs) | 1, mode="nearest")   # local: no reach into a start
             lower = max(lower, float(np.max((np.abs(smooth) - raised)[held])))
         for j, i0, ie, d, i1 in _starts(r):
-            need = d * level_start[j:ie] - (raised[j:ie] if c else 0.0)
+            need = d * level_start[j:ie] - (raised_start[j:ie] if c else 0.0)
             rest = p.x_raw[j:max(j + 1, i0 - int(0.01 * p.fs))]
             q = _quantum(p.x_raw[j:min(len(p.x_raw), ie + int(0.05 * p.fs))])
             events.append(dict(need=need, n=ie - j, r=r, j=j, ie=ie, d=d, t=float(p.t[i0]),
