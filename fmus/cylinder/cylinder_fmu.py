@@ -24,6 +24,7 @@ from boomfmi_cylinder_lib.model import Boom, Model, effects_from_options
 from boomfmi_cylinder_lib.physics import (Cylinder as CylinderParams, Gas, ParameterError,
                                           Valve, check_cylinder, check_gas)
 from boomfmi_cylinder_lib.physics import reference_rig
+from boomfmi_cylinder_lib.physics.effects import check_cushion_port
 
 
 class Cylinder(BoomSlave):
@@ -62,10 +63,7 @@ class Cylinder(BoomSlave):
             for name in ("A_cushion", "P_e"):
                 if not getattr(self, name) > 0.0:
                     raise ParameterError(name, getattr(self, name), "must be > 0 with the cushion on (l_cushion > 0)")
-            if self.V_cushion_port >= min(self.V_a0, self.V_b0):
-                raise ParameterError("V_cushion_port", self.V_cushion_port,
-                                     f"the cushion's port is part of the dead volume: it must be smaller than "
-                                     f"V_a0 and V_b0 ({min(self.V_a0, self.V_b0):g} m^3)")
+            check_cushion_port(self.V_cushion_port, cyl, "V_cushion_port")
         for name in ("p_a0", "p_b0"):
             if not getattr(self, name) > 0.0:
                 raise ParameterError(name, getattr(self, name), "an absolute pressure must be > 0")

@@ -124,6 +124,12 @@ def mean_errors(values, effects, recs, rtol: float = RTOL) -> dict:
     return {c: float(np.mean([e[c] for e in per])) for c in CHANNELS}
 
 
+def fit_cost(values: dict, effects: dict, recs) -> float:
+    """The fit error a fit minimises: the squares of :func:`mean_errors` at
+    ``FIT_RTOL``, summed over the channels."""
+    return sum(e * e for e in mean_errors(values, effects, recs, FIT_RTOL).values())
+
+
 def noise_floor(rec) -> dict:
     """Each channel's measurement noise over its range: the RMS of what a 50 Hz
     low-pass removes."""
@@ -172,8 +178,7 @@ def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = N
         return out
 
     def cost(z):
-        e = mean_errors(values, to_effects(z), fit_recs, FIT_RTOL)
-        return sum(v * v for v in e.values())
+        return fit_cost(values, to_effects(z), fit_recs)
 
     bounds = [(math.log10(lo), math.log10(hi)) if log else (lo, hi) for _, _, lo, hi, log in spec]
     if start is not None:
@@ -280,7 +285,7 @@ def _fit_friction(name, fit_recs, hold_recs):
     v_s = min(seen, key=lambda k: seen[k][0])
     joint = {k: v for k, v in seen[v_s][1].items() if math.isfinite(v)}
     fx = {name: {param: v_s}}
-    cost = sum(e * e for e in mean_errors(joint, fx, fit_recs, FIT_RTOL).values())
+    cost = fit_cost(joint, fx, fit_recs)
     return name, fx, cost, mean_errors(joint, fx, hold_recs), joint
 
 
@@ -299,7 +304,7 @@ def _seal_laws(rig, preps):
 
 
 def _fit_pressure_friction(name, rig, preps, fit_recs, hold_recs):
-    fits = [(sum(e * e for e in mean_errors(joint, fx, fit_recs, FIT_RTOL).values()), fx, joint)
+    fits = [(fit_cost(joint, fx, fit_recs), fx, joint)
             for _, fx, joint in _seal_laws(rig, preps)]
     cost, fx, joint = min(fits, key=lambda f: f[0])
     return name, fx, cost, mean_errors(joint, fx, hold_recs), joint
@@ -341,7 +346,7 @@ def _friction_told(fit_recs, hold_recs, before: dict):
     gain = shrink(before, after)
     if not gain > 0.0:
         return None
-    cost = sum(e * e for e in mean_errors(joint, fx, fit_recs, FIT_RTOL).values())
+    cost = fit_cost(joint, fx, fit_recs)
     return Candidate("pressure_friction", fx["pressure_friction"], cost, after, gain, score=1.0, values=joint)
 
 
@@ -414,7 +419,7 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
         att = Attribution(before, noise, gap, [told] if told else [], [told.name] if told else [])
         att.threshold, att.spread, att.beyond_noise, att.told = threshold, spread, beyond_noise, told is not None
         return att
-    base_cost = sum(e * e for e in mean_errors(values, {}, fit_recs, FIT_RTOL).values())
+    base_cost = fit_cost(values, {}, fit_recs)
     fitted = _map(_fit_and_score, [(n, values, fit_recs, hold_recs, None, base_cost) for n in names], workers)
     cands = [Candidate(n, fx[n], cost, after, shrink(before, after), values=joint)
              for n, fx, cost, after, joint in fitted]
@@ -453,8 +458,7 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     return att
 
 
-def _pairs(cands, values, fit_recs, hold_recs, before, workers, noise: float = 0.0,
-           base_cost: float | None = None):
+def _pairs(cands, values, fit_recs, hold_recs, before, workers, noise: float, base_cost: float):
     """The best pair of effects, where no single one explains the gap or the best leaves
     one beyond the noise.  Pairs are drawn among the PAIR_POOL candidates that helped
     most on the holdout on their own (not only beside the best: two effects may each
@@ -475,7 +479,7 @@ def _pairs(cands, values, fit_recs, hold_recs, before, workers, noise: float = 0
     # error first).  Among those that lower that error by SCREEN (``base_cost``: the
     # baseline's), whatever they do to the holdout alone, where the strong one's
     # misfit may bury them: the pair must still pay on the holdout.
-    showed = [c for c in cands if c.fit_error <= (1.0 - SCREEN) * base_cost] if base_cost else helped
+    showed = [c for c in cands if c.fit_error <= (1.0 - SCREEN) * base_cost]
     pool += [c for c in sorted(showed, key=lambda c: c.fit_error)[:FIT_POOL] if c not in pool]
     by_name = {c.name: c for c in cands}
     # where the best explains the gap on its own, a pair must hold it (another pair
@@ -542,7 +546,7 @@ def _fit_pair(args):
     single_cost = min(single_costs.values())
     strong = min(names, key=lambda n: single_costs[n])
     weak = next(n for n in names if n != strong)
-    at = lambda fx: sum(e * e for e in mean_errors(values, fx, fit_recs, FIT_RTOL).values())
+    at = lambda fx: fit_cost(values, fx, fit_recs)
     enough = (1.0 - SCREEN) * single_cost
     starts = [(at(start), start)]
     # both singles taking the same feature whole (a delay): each takes half of it

@@ -435,6 +435,15 @@ def _starts(r: Motion):
     return out
 
 
+def _static_level(p_a, p_b, phi, cyl: ph.Cylinder, P_atm: float, F_L: float, c: float, pressure: str | None):
+    """The static level [N] the drive force of pressures ``p_a``, ``p_b`` [Pa] would
+    have to pass at each sample (Eq. 9: ``(F_p - F_L sin(phi)) / cos(phi)``) and the
+    seals' share of it, ``c`` [N/Pa] times their pressure by law ``pressure`` (0
+    without)."""
+    level = (ph.piston_force(p_a, p_b, cyl, P_atm) - F_L * np.sin(phi)) / np.cos(phi)
+    return level, (c * fx.seal_pressure(p_a, p_b, P_atm, pressure) if c else 0.0)
+
+
 def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: float,
                     n_grid: int = 400, v_s: float = 0.0, pressure: str | None = None):
     """Stage 3: F_s from every start (see the module's docstring).  With a Stribeck
@@ -457,11 +466,9 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
         # running maximum below would pick the noise's peaks; at the other stages' 25 Hz,
         # the filter smears the valve step's corner back before the start)
         fc = min(START_CUTOFF, 0.4 * p.fs)
-        p_a_start, p_b_start = lowpass(p.p_a_raw, p.fs, fc), lowpass(p.p_b_raw, p.fs, fc)
-        level_start = (ph.piston_force(p_a_start, p_b_start, cyl, P_atm) - F_L * np.sin(p.phi)) / np.cos(p.phi)
-        level = (ph.piston_force(p.p_a, p.p_b, cyl, P_atm) - F_L * np.sin(p.phi)) / np.cos(p.phi)
-        raised = c * fx.seal_pressure(p.p_a, p.p_b, P_atm, pressure) if c else 0.0   # the seals' share
-        raised_start = c * fx.seal_pressure(p_a_start, p_b_start, P_atm, pressure) if c else 0.0
+        level_start, raised_start = _static_level(lowpass(p.p_a_raw, p.fs, fc), lowpass(p.p_b_raw, p.fs, fc),
+                                                  p.phi, cyl, P_atm, F_L, c, pressure)
+        level, raised = _static_level(p.p_a, p.p_b, p.phi, cyl, P_atm, F_L, c, pressure)
         # the largest drive force held at rest in mid-stroke (away from the last
         # samples before a start): a lower bound of F_s
         # (a rest within STOP_ZONE of the stops, or of the extremes the recording

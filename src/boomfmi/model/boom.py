@@ -58,11 +58,8 @@ class Model:
         ph.check_cylinder(self.cylinder)
         ph.check_load(self.load)
         ph.check_geometry(self.geometry, self.cylinder.L)
-        V_p = _param(self.effects, "end_cushioning", "V_p")
-        if V_p >= min(self.cylinder.V_a0, self.cylinder.V_b0):
-            raise ph.ParameterError("effects.end_cushioning.V_p", V_p,
-                                    f"the cushion's port must be smaller than the dead volumes V_a0, V_b0 "
-                                    f"({self.cylinder.V_a0:g}, {self.cylinder.V_b0:g} m^3) it is part of")
+        fx.check_cushion_port(_param(self.effects, "end_cushioning", "V_p"), self.cylinder,
+                              "effects.end_cushioning.V_p")
 
 
 def check_effects(effects: dict) -> None:

@@ -18,7 +18,8 @@ import numpy as np
 from . import _xp as xp
 from .lag import first_order_step
 from .orifice import signed_mass_flow, signed_mass_flow_slope
-from .params import Gas, Load
+from .params import Cylinder, Gas, Load
+from .validation import ParameterError
 
 
 def spool_lag_step(y: float, u: float, dt: float, tau: float) -> float:
@@ -211,6 +212,14 @@ def cushion_engagement_slope(distance: float, length: float) -> float:
     if length <= 0.0 or not 0.8 * length < distance < length:
         return 0.0
     return -1.0 / (0.2 * length)
+
+
+def check_cushion_port(V_p: float, cyl: Cylinder, name: str = "V_p") -> None:
+    """Raise :class:`ParameterError` (naming ``name``) unless the cushion's port volume
+    ``V_p`` [m^3], part of each chamber's dead volume, is smaller than both."""
+    if V_p >= min(cyl.V_a0, cyl.V_b0):
+        raise ParameterError(name, V_p, f"the cushion's port is part of the dead volume: it must be smaller "
+                                        f"than V_a0 and V_b0 ({cyl.V_a0:g}, {cyl.V_b0:g} m^3)")
 
 
 def cushion_port_cut(distance, length: float, V_p: float):
