@@ -6,7 +6,8 @@ linkage, read backwards from the measured pressures and angles with the identifi
 friction per cylinder and the payload) combined into the tip force by least squares over
 the Jacobian transpose (four joints, three unknowns); ``residual`` is the misfit of the
 four equations [N m].  ``physics/excavator_force.py`` holds the physics.  The measured
-angles pass a critically damped second-order filter (``f_motion``), the pneumatic forces
+angles pass a critically damped second-order filter (``f_motion``; the swing's
+``f_motion_swing``), the pneumatic forces
 the same filter; the estimate then a first-order low-pass (``tau_est``).  ``f_reflect_*``,
 the joystick's 3-axis force command, is ``gain * f_est`` per axis, saturated to
 +-``f_max`` and rate-limited to ``rate_max``.  All outputs are states updated once per
@@ -34,8 +35,8 @@ import numpy as np
 from boomfmi_excavator_force_estimator_lib.fmislave import BoomSlave, input, output, parameter
 from boomfmi_excavator_force_estimator_lib.physics import reference_rig
 from boomfmi_excavator_force_estimator_lib.physics.excavator import JOINTS, Excavator, check_excavator
-from boomfmi_excavator_force_estimator_lib.physics.excavator_force import (observer_start, observer_step,
-                                                                           reflected_force_3d)
+from boomfmi_excavator_force_estimator_lib.physics.excavator_force import (F_MOTION, F_MOTION_SWING, observer_start,
+                                                                           observer_step, reflected_force_3d)
 from boomfmi_excavator_force_estimator_lib.physics.validation import require_non_negative, require_positive
 
 _EX = Excavator()
@@ -80,10 +81,11 @@ class ExcavatorForceEstimator(BoomSlave):
         *(v for j in JOINTS for v in _friction(j)),
         parameter("payload", 0.0, "kg", "payload in the bucket (identified)", min=0.0),
         parameter("P_atm", reference_rig.P_atm, "Pa", "atmospheric pressure (gauge to absolute)", min=0.0),
-        parameter("f_motion", 30.0, "Hz", "corner frequency of the critically damped filter of the measured angles",
-                  min=0.0),
+        parameter("f_motion", F_MOTION, "Hz", "corner frequency of the critically damped filter of the measured "
+                  "boom, arm and bucket angles and their pneumatic forces", min=0.0),
+        parameter("f_motion_swing", F_MOTION_SWING, "Hz", "the same filter's corner for the swing (its row alone "
+                  "feels the lateral force)", min=0.0),
         parameter("tau_est", 0.004, "s", "time constant of the estimate's low-pass; 0: none", min=0.0),
-        parameter("v_rest", 2e-3, "m/s", "below this filtered piston speed a cylinder counts as at rest", min=0.0),
         parameter("rest_weight", 0.3, "1", "least-squares weight of a joint at rest (1: a sliding joint's)", min=0.0),
         parameter("stop_weight", 0.02, "1", "least-squares weight of a joint at an end stop", min=0.0),
         parameter("v_info", 1e-3, "m/s", "above this piston speed (by both filters) a sliding joint is informative",
@@ -109,17 +111,17 @@ class ExcavatorForceEstimator(BoomSlave):
         self._state = None
 
     def setup(self):
-        for name in ("payload", "tau_est", "v_rest", "rest_weight", "stop_weight", "gain", "v_info"):
+        for name in ("payload", "tau_est", "rest_weight", "stop_weight", "gain", "v_info"):
             require_non_negative(name, getattr(self, name))
-        for name in ("f_motion", "f_info", "f_max", "rate_max", "P_atm"):
+        for name in ("f_motion", "f_motion_swing", "f_info", "f_max", "rate_max", "P_atm"):
             require_positive(name, getattr(self, name))
         acts = {j: replace(getattr(_EX, j), K_v=getattr(self, f"K_v_{j}"), F_s=getattr(self, f"F_s_{j}"),
                            F_d=getattr(self, f"F_d_{j}")) for j in JOINTS}
         ex = replace(_EX, **acts, P_atm=self.P_atm)
         check_excavator(ex)
         self._ex = ex
-        self._observe = partial(observer_step, omega=2.0 * math.pi * self.f_motion, ex=ex, payload=self.payload,
-                                tau_est=self.tau_est, v_rest=self.v_rest, rest_weight=self.rest_weight,
+        self._observe = partial(observer_step, omega=2.0 * math.pi * np.array([self.f_motion_swing] + [self.f_motion] * 3), ex=ex, payload=self.payload,
+                                tau_est=self.tau_est, rest_weight=self.rest_weight,
                                 stop_weight=self.stop_weight, v_info=self.v_info, f_info=self.f_info)
         self._reset()
 

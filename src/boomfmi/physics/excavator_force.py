@@ -12,7 +12,10 @@ Eq. 12 and the triangles to piston positions), F_p the pneumatic forces of the m
 pressures through the same filter (the same delay on both sides), the bias the
 Coriolis, centrifugal and gravity forces, and friction Eq. 9's (``K_v v + F_d scale
 sign(v)`` while sliding).  At rest friction can hold anything up to ``F_s scale``;
-as the boom's observer, only what it cannot hold is reported.  Each joint's torque
+as the boom's observer, only what it cannot hold is reported.  A joint slides only
+where it is informative (:func:`informative_joints`); any other is at rest, and one
+that a slower filter sees still has no speed or acceleration of its own (the angle
+sensor's steps are not motion).  Each joint's torque
 ``tau_i`` = that force times its lever arm.
 
 The tip force (three unknowns) from the four joint torques by least squares over the
@@ -34,7 +37,7 @@ from .lag import first_order_step
 
 
 def observed_joint_torques(x, v, a, drive, ex: exc.Excavator = exc.Excavator(), payload: float = 0.0,
-                           v_rest: float = 2e-3, x_stop: float = 5e-4, sliding=None):
+                           v_rest: float = 2e-3, x_stop: float = 5e-4, sliding=None, x_measured=None):
     """The joint torques [N m] the environment exerts (``J^T f_tip`` if all of it is at
     the tip), from the pistons' position ``x`` [m], velocity ``v`` [m/s], acceleration
     ``a`` [m/s^2] and the pneumatic forces ``drive`` [N] (4-vectors).  Returns
@@ -43,7 +46,10 @@ def observed_joint_torques(x, v, a, drive, ex: exc.Excavator = exc.Excavator(), 
     it is within ``x_stop`` [m] of an end stop (a force towards the stop is the stop's
     reaction and is not reported).  ``sliding`` (optional, per joint -1, 0 or +1): a
     joint with a non-zero entry counts as sliding that way, whatever ``v`` says (a slow
-    creep that the fast filter's speed, noisy with the angle sensor's steps, misses)."""
+    creep that the fast filter's speed, noisy with the angle sensor's steps, misses).
+    ``x_measured`` (optional) [m]: the unfiltered positions; a joint within ``x_stop``
+    of a stop by either counts as there (an arrival's impact reaches the stop in the
+    measurement a filter's delay before the filtered position does)."""
     x = np.clip(np.asarray(x, float), 0.0, ex.strokes)
     v = np.asarray(v, float)
     Mx, bias, lam = exc.piston_dynamics(x, v, payload, ex)
@@ -60,9 +66,11 @@ def observed_joint_torques(x, v, a, drive, ex: exc.Excavator = exc.Excavator(), 
             gap[i] = g0[i] + max(-hold, min(hold, -g0[i]))
         else:
             gap[i] = g0[i] + act.K_v * v[i] + direction[i] * act.F_d * scale[i]
-    at_stop = (x <= x_stop) | (x >= ex.strokes - x_stop)
-    gap = np.where(x <= x_stop, np.minimum(gap, 0.0), gap)
-    gap = np.where(x >= ex.strokes - x_stop, np.maximum(gap, 0.0), gap)
+    xl = x if x_measured is None else np.minimum(x, np.asarray(x_measured, float))
+    xu = x if x_measured is None else np.maximum(x, np.asarray(x_measured, float))
+    at_stop = (xl <= x_stop) | (xu >= ex.strokes - x_stop)
+    gap = np.where(xl <= x_stop, np.minimum(gap, 0.0), gap)
+    gap = np.where(xu >= ex.strokes - x_stop, np.maximum(gap, 0.0), gap)
     return gap / lam, resting, at_stop
 
 
@@ -132,6 +140,24 @@ def _low_pass_known(prev, new, dt: float, tau: float):
     return out
 
 
+#: [Hz] The filters' corner for the boom, arm and bucket: the estimate's z lags the
+#: force by about 20 ms (the boom's force estimator's lag target) with a quarter of
+#: the acceleration noise that one count of the 12-bit angle makes at 30 Hz.
+F_MOTION = 15.0
+#: [Hz] The swing's: its row of J^T alone feels the lateral force (no other joint's row
+#: averages its noise there), and one count of its angle (46 um at its 60 mm crank)
+#: through a 15 Hz filter reads, on the upper structure's 600 to 900 kg in piston
+#: coordinates, as some 25 N sideways at the tip (3 N at 5 Hz); the lateral estimate
+#: lags by about 60 ms instead.
+F_MOTION_SWING = 5.0
+
+#: [m/s] A joint on an end stop whose slower filter (``f_info``) still reads more than
+#: this is arriving (decelerating), not pressed: the angle sensor's steps alone move
+#: that filter by a millimetre or two per second (12 bits over pi at the swing's 60 mm
+#: crank: one count is 46 um).
+V_ARRIVAL = 10e-3
+
+
 def observer_start(angles, p_a, p_b, ex: exc.Excavator = exc.Excavator()):
     """The observer's state at its first measurement (``angles`` [rad], absolute
     pressures [Pa]): filters at rest there, no force."""
@@ -141,37 +167,43 @@ def observer_start(angles, p_a, p_b, ex: exc.Excavator = exc.Excavator()):
             "informative": np.zeros(4, bool)}
 
 
-def observer_step(state: dict, angles, p_a, p_b, dt: float, omega: float, ex: exc.Excavator = exc.Excavator(),
-                  payload: float = 0.0, tau_est: float = 0.004, v_rest: float = 2e-3, rest_weight: float = 0.3,
+def observer_step(state: dict, angles, p_a, p_b, dt: float, omega, ex: exc.Excavator = exc.Excavator(),
+                  payload: float = 0.0, tau_est: float = 0.004, rest_weight: float = 0.3,
                   stop_weight: float = 0.02, v_info: float = 1e-3, f_info: float = 3.0):
     """One step of the excavator's tip-force observer with the measurements held over
     ``dt`` [s]: joint ``angles`` [rad], absolute pressures [Pa] (4-vectors); ``omega``
-    [rad/s] the filters' corner.  Returns ``(state, f_est, residual, tau)``: the new
+    [rad/s] the filters' corner, one for all joints or one per joint (swing, boom,
+    arm, bucket; see :data:`F_MOTION_SWING`).  Returns ``(state, f_est, residual, tau)``: the new
     state, the tip force [N] after the first-order low-pass ``tau_est`` [s], the
     least-squares residual [N m] and the joint torques [N m].
 
-    Beside it, the estimate from the informative joints alone (:func:`informative_joints`,
-    sliding by a slower filter of the angles, corner ``f_info`` [Hz], above ``v_info``
-    [m/s]; their torques by the sliding law in that direction) as
-    ``state["f_known"]``, ``nan`` where they do not determine a component
-    (:func:`tip_force_determined`), and their mask as ``state["informative"]``."""
+    A joint slides when it is informative (:func:`informative_joints`: sliding by both
+    the fast filter and a slower one of the angles, corner ``f_info`` [Hz], above
+    ``v_info`` [m/s], off its stops); its torque then comes from the sliding law in
+    the slow filter's direction.  Any other joint counts as at rest (its torque known to
+    within its static friction), and one whose slow filter's speed is not above
+    ``v_info`` has no speed and no acceleration of its own: what the fast filter makes
+    of the angle sensor's steps there (a step of one count reads as metres per second
+    squared, and the swing's crank turns that into hundreds of newtons) is noise, not
+    motion.
+
+    Beside the least-squares estimate over all four joints, the estimate from the
+    informative joints alone, ``nan`` where they do not determine a component
+    (:func:`tip_force_determined`), as ``state["f_known"]``, and their mask as
+    ``state["informative"]``."""
     xm = exc.pistons_from_angles(np.asarray(angles, float), ex)
     Fm = exc.cylinder_forces(p_a, p_b, ex)
+    omega = np.broadcast_to(np.asarray(omega, float), (4,))
     xs, vs, v_mean, a_mean = [], [], np.empty(4), np.empty(4)
     F_new, dF_new, F_mid = np.empty(4), np.empty(4), np.empty(4)
     for i in range(4):
-        x1, v1, v_mean[i], a_mean[i] = motion_filter_step(state["x"][i], state["v"][i], xm[i], dt, omega)
+        x1, v1, v_mean[i], a_mean[i] = motion_filter_step(state["x"][i], state["v"][i], xm[i], dt, omega[i])
         xs.append(x1)
         vs.append(v1)
-        F1, dF1, _, _ = motion_filter_step(state["F"][i], state["dF"][i], Fm[i], dt, omega)
+        F1, dF1, _, _ = motion_filter_step(state["F"][i], state["dF"][i], Fm[i], dt, omega[i])
         F_mid[i] = 0.5 * (state["F"][i] + F1)
         F_new[i], dF_new[i] = F1, dF1
     x_mid = 0.5 * (np.asarray(state["x"]) + np.asarray(xs))
-    tau, resting, at_stop = observed_joint_torques(x_mid, v_mean, a_mean, F_mid, ex, payload, v_rest)
-    q = exc.joint_angles(np.clip(x_mid, 0.0, ex.strokes), ex)
-    w = np.where(at_stop, stop_weight, np.where(resting, rest_weight, 1.0))
-    f, residual = tip_force_from_torques(q, tau, w, ex)
-    f_est = np.array([first_order_step(state["f"][k], f[k], dt, tau_est) for k in range(3)])
     w_info = 2.0 * math.pi * f_info
     x_slow, v_slow = np.empty(4), np.empty(4)
     for i in range(4):
@@ -183,11 +215,21 @@ def observer_step(state: dict, angles, p_a, p_b, dt: float, omega: float, ex: ex
     # off the stops both as measured and as filtered (the filters carry an arrival's
     # impact for their delay after the measured position reached the stop)
     info = informative_joints(xm, v_both, ex, v_info) & informative_joints(x_mid, v_both, ex, v_info)
-    tau_i, _, _ = observed_joint_torques(x_mid, v_mean, a_mean, F_mid, ex, payload, v_rest,
-                                         sliding=np.where(info, np.sign(v_slow), 0.0))
-    f_det, _ = tip_force_determined(q, tau_i, info, ex)
-    new = {"x_slow": x_slow, "v_slow": v_slow, "x": np.asarray(xs), "v": np.asarray(vs), "F": F_new, "dF": dF_new, "f": f_est,
-           "f_known": _low_pass_known(state.get("f_known", np.full(3, np.nan)), f_det, dt, tau_est),
+    # a joint still by both filters, or pressed on a stop, has no motion of its own: the
+    # fast filter's speed and acceleration there are the sensor's steps; one that is
+    # arriving at a stop is decelerating (its impact couples into the others' rows)
+    arriving = np.abs(v_slow) > V_ARRIVAL
+    moving = (np.abs(v_both) > v_info) & (arriving | informative_joints(xm, v_both, ex, v_info, x_stop=5e-4))
+    tau, resting, at_stop = observed_joint_torques(x_mid, np.where(moving, v_mean, 0.0),
+                                                   np.where(moving, a_mean, 0.0), F_mid, ex, payload, 0.0,
+                                                   sliding=np.where(info, np.sign(v_slow), 0.0), x_measured=xm)
+    q = exc.joint_angles(np.clip(x_mid, 0.0, ex.strokes), ex)
+    w = np.where(at_stop, stop_weight, np.where(resting, rest_weight, 1.0))
+    f, residual = tip_force_from_torques(q, tau, w, ex)
+    f_est = np.array([first_order_step(state["f"][k], f[k], dt, tau_est) for k in range(3)])
+    f_det, _ = tip_force_determined(q, tau, info, ex)
+    new = {"x_slow": x_slow, "v_slow": v_slow, "x": np.asarray(xs), "v": np.asarray(vs), "F": F_new, "dF": dF_new,
+           "f": f_est, "f_known": _low_pass_known(state.get("f_known", np.full(3, np.nan)), f_det, dt, tau_est),
            "informative": info}
     return new, f_est, residual, tau
 
@@ -199,9 +241,10 @@ def reflected_force_3d(f_est, f_prev, dt, gain, f_max, rate_max):
                      for k in range(3)])
 
 
-def estimate_tip_force(data, ex: exc.Excavator = exc.Excavator(), payload: float = 0.0, f_motion: float = 30.0,
-                       tau_est: float = 0.004, v_rest: float = 2e-3, rest_weight: float = 0.3, stop_weight: float = 0.02, P_atm=None,
-                       cannot_tell: bool = False, v_info: float = 1e-3, f_info: float = 3.0):
+def estimate_tip_force(data, ex: exc.Excavator = exc.Excavator(), payload: float = 0.0, f_motion: float = F_MOTION,
+                       tau_est: float = 0.004, rest_weight: float = 0.3, stop_weight: float = 0.02, P_atm=None,
+                       cannot_tell: bool = False, v_info: float = 1e-3, f_info: float = 3.0,
+                       f_motion_swing: float = F_MOTION_SWING):
     """The observer run over an excavator recording (a DataFrame with its columns,
     pressures gauge): arrays ``f`` (n, 3) [N] and ``residual`` (n,) [N m].
 
@@ -213,7 +256,7 @@ def estimate_tip_force(data, ex: exc.Excavator = exc.Excavator(), payload: float
     Q = np.column_stack([data[f"angle_{j}"].to_numpy(float) for j in exc.JOINTS])
     PA = np.column_stack([data[f"p_a_{j}"].to_numpy(float) for j in exc.JOINTS]) + P_atm
     PB = np.column_stack([data[f"p_b_{j}"].to_numpy(float) for j in exc.JOINTS]) + P_atm
-    omega = 2.0 * math.pi * f_motion
+    omega = 2.0 * math.pi * np.array([f_motion_swing, f_motion, f_motion, f_motion])
     state = observer_start(Q[0], PA[0], PB[0], ex)
     f = np.zeros((len(t), 3))
     res = np.zeros(len(t))
@@ -221,7 +264,7 @@ def estimate_tip_force(data, ex: exc.Excavator = exc.Excavator(), payload: float
     n_info = np.zeros(len(t), int)
     for k in range(1, len(t)):
         state, f[k], res[k], _ = observer_step(state, Q[k], PA[k], PB[k], t[k] - t[k - 1], omega, ex, payload,
-                                               tau_est, v_rest, rest_weight, stop_weight, v_info, f_info)
+                                               tau_est, rest_weight, stop_weight, v_info, f_info)
         f_known[k] = state["f_known"]
         n_info[k] = int(np.sum(state["informative"]))
     if cannot_tell:
