@@ -35,7 +35,17 @@ def test_identified_within_5_percent(identified, name):
     assert lo < result.params[name].value < hi
 
 
-@pytest.mark.xfail(strict=True, reason="measured F_s_boom +14.4 % on this seed (+6.2 and +7.2 % on the "
+def test_held_force_bounds_static_friction_from_below(identified):
+    """The largest force a joint is seen to hold at rest is a lower bound of its F_s
+    only where the other joints' motion, whose share of the net force comes from
+    filtered accelerations, does not prop it up: every joint's bound stays below the
+    truth (the boom's read 128.6 N against 113.3 N while the swing and arm started)."""
+    result, truth = identified
+    for j in ("swing", "boom", "arm", "bucket"):
+        assert result.details["static_friction"][j]["lower_bound_N"] <= truth[f"F_s_{j}"], j
+
+
+@pytest.mark.xfail(strict=True, reason="measured F_s_boom +7.7 % on this seed (+6.7 and +5.4 % on the "
                                        "benchmark's other two seeds), its interval holding the truth and identify "
                                        "warning that the starts put it anywhere in it: the boom's starts are fast, "
                                        "see docs/excavator.md")

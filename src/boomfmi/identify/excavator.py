@@ -64,6 +64,8 @@ class JointData:
     D0: np.ndarray             #: M_x(0) x'' + bias(0) - lam J^T f_tip [N] (25 Hz signals)
     dD: np.ndarray             #: the payload's share per kg [N/kg]
     own0: np.ndarray           #: the joint's own inertia M_x[i,i](0) x''_i [N]
+    unsure: np.ndarray         #: [N] the other joints' motion's share of D0 (D0 - own0 - gravity, no payload):
+                               #: known only as well as their filtered accelerations and speeds
     down: np.ndarray           #: its payload share per kg [N/kg]
     Mii0: np.ndarray           #: M_x[i, i] at no payload [kg]
     dMii: np.ndarray           #: per kg of payload
@@ -105,12 +107,15 @@ def prepare_excavator(rec, ex: exc.Excavator = exc.Excavator(), cutoff: float = 
     D = np.empty((2, n, 4))
     own = np.empty((2, n, 4))
     Mii = np.empty((2, n, 4))
+    unsure = np.empty((n, 4))
+    zero = np.zeros(4)
     for k in range(n):
         for m in (0, 1):
             Mx, bias, lam = exc.piston_dynamics(xc[k], v[k], float(m), ex)
             D[m, k] = Mx @ a[k] + bias
             own[m, k] = np.diag(Mx) * a[k]
             Mii[m, k] = np.diag(Mx)
+        unsure[k] = np.abs(D[0, k] - own[0, k] - exc.piston_dynamics(xc[k], zero, 0.0, ex)[1])
         if f_tip is not None:
             q = exc.joint_angles(xc[k], ex)
             tau = exc.tip_torques(q, f_tip[k], ex) / exc.lever_arms(xc[k], ex)
@@ -128,6 +133,7 @@ def prepare_excavator(rec, ex: exc.Excavator = exc.Excavator(), cutoff: float = 
                      source=f"{getattr(rec, 'path', '')}:{j}")
         out.append(JointData(p=p, modes=motion_modes(p, act.stroke), F_p=F_p[:, i], scale=scale[:, i],
                              D0=D[0, :, i], dD=D[1, :, i] - D[0, :, i], own0=own[0, :, i],
+                             unsure=unsure[:, i],
                              down=own[1, :, i] - own[0, :, i], Mii0=Mii[0, :, i], dMii=Mii[1, :, i] - Mii[0, :, i],
                              L=act.stroke))
     return out
@@ -238,7 +244,11 @@ def identify_excavator(recordings, ex: exc.Excavator = exc.Excavator(), cutoff: 
         motions = [motion(_equivalent(r[i], payload), cyl, P_atm) for r in data]
         # the joint's own mass where each start happens (it moves with the posture)
         M = [r[i].Mii0 + payload * r[i].dMii for r in data]
-        base = {"M": M, "K_v": est[f"K_v_{j}"].value, "F_d": est[f"F_d_{j}"].value, "F_L": 0.0}
+        # the other joints' motion's share of the net force is known only as well as
+        # their filtered motion: a rest's force bounds F_s only beyond it, and a start
+        # tells F_s only to within it
+        base = {"M": M, "K_v": est[f"K_v_{j}"].value, "F_d": est[f"F_d_{j}"].value, "F_L": 0.0,
+                "F_unsure": [r[i].unsure for r in data]}
         F_s, identified, info3 = static_friction(motions, base, cyl, P_atm)
         details["static_friction"][j] = dict(info3, identified=bool(identified))
         if F_s is None:

@@ -453,7 +453,10 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
     rise by ``base``'s coefficient times the seals' pressure, and F_s is the level at
     none.  ``base["M"]`` is the moving mass [kg], or one array per motion of the mass at
     each sample (a linkage's joint, whose mass moves with its posture: each start then
-    runs with the mass where it starts).  Returns ``(Estimate or None, identified,
+    runs with the mass where it starts).  ``base["F_unsure"]`` (optional, one array per
+    motion) [N]: how far the net force at each sample is unsure (a linkage's terms from
+    every joint's filtered motion); a rest's force counts towards the lower bound only
+    beyond it, and a start's evidence is blurred by its largest value over the start.  Returns ``(Estimate or None, identified,
     details)``."""
     M, K_v, F_d, F_L = (base[k] for k in ("M", "K_v", "F_d", "F_L"))
     mass_at = (lambda ri, j: float(M[ri][j])) if isinstance(M, (list, tuple)) else (lambda ri, j: float(M))
@@ -480,14 +483,17 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
         held[:edge] = held[-edge:] = False
         if held.any():
             smooth = median_filter(level, size=int(0.02 * p.fs) | 1, mode="nearest")   # local: no reach into a start
-            lower = max(lower, float(np.max((np.abs(smooth) - raised)[held])))
+            unsure = base["F_unsure"][ri] / np.cos(p.phi) if "F_unsure" in base else 0.0
+            lower = max(lower, float(np.max((np.abs(smooth) - raised - unsure)[held])))
         for j, i0, ie, d, i1 in _starts(r):
             need = d * level_start[j:ie] - (raised_start[j:ie] if c else 0.0)
             rest = p.x_raw[j:max(j + 1, i0 - int(0.01 * p.fs))]
             q = _quantum(p.x_raw[j:min(len(p.x_raw), ie + int(0.05 * p.fs))])
+            unsure_start = (float(np.max((base["F_unsure"][ri] / np.cos(p.phi))[j:ie + 1]))
+                            if "F_unsure" in base else 0.0)
             events.append(dict(need=need, n=ie - j, r=r, j=j, ie=ie, d=d, t=float(p.t[i0]),
                                reading=float(np.median(rest)), q=q, spread=float(np.std(rest)),
-                               M=mass_at(ri, j)))
+                               M=mass_at(ri, j), unsure=unsure_start))
     if not events:
         return None, False, {"starts": 0, "lower_bound_N": lower}
     hi_level = max(float(np.max(e["need"])) for e in events)
@@ -535,6 +541,9 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
         # a start the sensor saw late) cannot veto all the others
         post = np.exp(ll - np.max(ll))
         post /= post.sum()
+        if e["unsure"] > 0.0:
+            # a start whose drive force is unsure by u tells F_s only to within u
+            post = _blurred(post, e["unsure"] / (grid[1] - grid[0]))
         total += np.log((1.0 - STRAY) * post + STRAY / n_grid)
         each.append({"t_s": round(e["t"], 4), "F_s_N": float(grid[int(np.argmax(ll))])})
     # the posterior over the grid (uniform prior above the largest force held at rest)
@@ -560,6 +569,16 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
     identified = hi_F < grid[-2] and est.relative_halfwidth < IDENTIFIED_WIDTH
     return est, identified, {"starts": len(events), "each": each, "lower_bound_N": lower,
                              "grid_N": [float(grid[0]), float(grid[-1])]}
+
+
+def _blurred(post: np.ndarray, width: float) -> np.ndarray:
+    """A distribution over an even grid convolved with a normal distribution of standard
+    deviation ``width`` [grid steps] (mass beyond the grid's ends kept at them)."""
+    n = len(post)
+    k = np.arange(n)
+    kernel = np.exp(-0.5 * ((k[:, None] - k[None, :]) / max(width, 1e-9)) ** 2)
+    out = kernel @ (post / kernel.sum(axis=0))
+    return out / out.sum()
 
 
 def start_spread(levels) -> float:
