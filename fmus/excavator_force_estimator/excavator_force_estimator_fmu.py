@@ -7,9 +7,9 @@ friction per cylinder and the payload) combined into the tip force by least squa
 the Jacobian transpose (four joints, three unknowns); ``residual`` is the misfit of the
 four equations [N m].  ``physics/excavator_force.py`` holds the physics.  The measured
 angles pass a critically damped second-order filter (``f_motion``; the swing's
-``f_motion_swing``), the pneumatic forces
-the same filter; the estimate then a first-order low-pass (``tau_est``).  ``f_reflect_*``,
-the joystick's 3-axis force command, is ``gain * f_est`` per axis, saturated to
+``f_motion_swing``), the pneumatic forces the same filter; the estimate then a
+first-order low-pass (``tau_est``).  ``f_reflect_*``, the joystick's 3-axis force
+command, is ``gain * f_est`` per axis, saturated to
 +-``f_max`` and rate-limited to ``rate_max``.  All outputs are states updated once per
 communication step (no direct feedthrough).
 
@@ -120,7 +120,8 @@ class ExcavatorForceEstimator(BoomSlave):
         ex = replace(_EX, **acts, P_atm=self.P_atm)
         check_excavator(ex)
         self._ex = ex
-        self._observe = partial(observer_step, omega=2.0 * math.pi * np.array([self.f_motion_swing] + [self.f_motion] * 3), ex=ex, payload=self.payload,
+        omega = 2.0 * math.pi * np.array([self.f_motion_swing] + [self.f_motion] * 3)     # swing, boom, arm, bucket
+        self._observe = partial(observer_step, omega=omega, ex=ex, payload=self.payload,
                                 tau_est=self.tau_est, rest_weight=self.rest_weight,
                                 stop_weight=self.stop_weight, v_info=self.v_info, f_info=self.f_info)
         self._reset()

@@ -456,8 +456,8 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
     runs with the mass where it starts).  ``base["F_unsure"]`` (optional, one array per
     motion) [N]: how far the net force at each sample is unsure (a linkage's terms from
     every joint's filtered motion); a rest's force counts towards the lower bound only
-    beyond it, and a start's evidence is blurred by its largest value over the start.  Returns ``(Estimate or None, identified,
-    details)``."""
+    beyond it, and a start's evidence is blurred by its largest value over the start.
+    Returns ``(Estimate or None, identified, details)``."""
     M, K_v, F_d, F_L = (base[k] for k in ("M", "K_v", "F_d", "F_L"))
     mass_at = (lambda ri, j: float(M[ri][j])) if isinstance(M, (list, tuple)) else (lambda ri, j: float(M))
     c = base.get(PRESSURE_COEFFICIENT[pressure], 0.0) if pressure is not None else 0.0
