@@ -319,13 +319,15 @@ def test_live_view_beside_a_running_excavator_cosimulation(driver, tmp_path):
     view, udp = live_view(driver, tmp_path)
     try:
         out = tmp_path / "live.csv"
-        simulate_live(udp, EXCAVATOR_SSP, "--experiment", "digging_cycle", "--stop", "1.0", "--out", out)
+        # the sender sends 60 samples per wall second: 5 s of the cycle run for about a second
+        # at five times real time, long enough for the 20 frames awaited below
+        simulate_live(udp, EXCAVATOR_SSP, "--experiment", "digging_cycle", "--stop", "5.0", "--out", out)
         s = _wait(driver, "const s = window.boomView.state(); return window.boomView.framesReceived > 20 "
                           "&& s && s.kind === 'excavator' && s")
         assert driver.execute_script("return window.boomView.hello.scene.kind") == "excavator"
         assert s["machineVisible"] and not s["ghostVisible"]               # the model alone: drawn as the machine
         data = pd.read_csv(out)
-        assert 0.0 < s["t"] <= 1.0
+        assert 0.0 < s["t"] <= 5.0
         for j in JOINTS:
             assert s["machineAngles"][j] == pytest.approx(float(np.interp(s["t"], data["t"], data[f"angle_{j}"])),
                                                           abs=2e-3), j

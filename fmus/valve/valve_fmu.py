@@ -54,14 +54,15 @@ class Valve(BoomSlave):
         self._key = None
 
     def _current_flows(self):
-        u = self._boom.opening(self._spool if self.tau_spool > 0.0 else self.u)
-        key = (u, self.p_a, self.p_b)
+        # the flows of the spool's (or the command's) position and the pressures, computed
+        # once for each new combination: every output asks for them
+        key = (self._spool if self.tau_spool > 0.0 else self.u, self.p_a, self.p_b)
         if key != self._key:
             if not (self.p_a >= 0.0 and self.p_b >= 0.0):
                 self.fail(f"input pressures must be >= 0 Pa absolute, got p_a = {self.p_a!r}, p_b = {self.p_b!r}")
                 self._flows = (0.0, 0.0, 0.0, 0.0)
             else:
-                self._flows = self._boom.valve_flows(u, self.p_a, self.p_b)
+                self._flows = self._boom.valve_flows(self._boom.opening(key[0]), self.p_a, self.p_b)
             self._key = key
         return self._flows
 

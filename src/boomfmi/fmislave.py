@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import sys
+from operator import attrgetter
 from typing import NamedTuple, Optional, Tuple
 
 from .model.catalogue import of_fmu
@@ -158,6 +159,7 @@ class BoomSlave(_FmiSlave):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self.failure: Optional[str] = None
+        self._real_access: dict = {}     # get_real/set_real's resolved names, per value-reference group
         self.start_time = 0.0
         self._time = 0.0        # the last communication point
         for var in self.variables:
@@ -182,6 +184,36 @@ class BoomSlave(_FmiSlave):
             self.register_variable(Real("time", causality=Causality.independent,
                                         variability=Variability.continuous,
                                         description="simulation time", getter=lambda: self._time))
+
+    # -- FMI 2.0 Real access, pythonfmu's semantics with the look-ups done once ---------
+    # pythonfmu's get_real/set_real look every value reference up, check its type and go
+    # through a closure per value on every call; a host sets and gets the same groups
+    # of variables every step, so each group's attribute names are resolved once.
+    def get_real(self, vrs):
+        get = self._real_access.get(("get", *vrs))
+        if get is None:
+            names = self._real_names(vrs)
+            get = self._real_access[("get", *vrs)] = attrgetter(*names) if len(names) > 1 else (
+                lambda obj, g=attrgetter(names[0]): (g(obj),))
+        return [float(value) for value in get(self)]
+
+    def set_real(self, vrs, values):
+        names = self._real_access.get(("set", *vrs))
+        if names is None:
+            names = self._real_access[("set", *vrs)] = self._real_names(vrs)
+        for name, value in zip(names, values):
+            setattr(self, name, value)
+
+    def _real_names(self, vrs) -> Tuple[str, ...]:
+        """The attribute names of Real variables ``vrs``; TypeError for another type, as
+        pythonfmu."""
+        names = []
+        for vr in vrs:
+            var = self.vars[vr]
+            if not isinstance(var, Real):
+                raise TypeError(f"Variable with valueReference={vr} is not of type Real!")
+            names.append(var.local_name)
+        return tuple(names)
 
     # -- to be provided by each FMU ------------------------------------------------
     def setup(self) -> None:

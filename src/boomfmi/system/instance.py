@@ -1,8 +1,9 @@
 """One FMI 2.0 co-simulation instance through fmpy, addressed by variable name.
 
 ``FmuInstance`` wraps ``fmpy.fmi2.FMU2Slave``: it extracts the FMU, collects the
-FMU's log messages, sets and gets variables by name (or by pre-resolved value
-references on a hot path), and turns a failed call into :class:`FmuError` carrying
+FMU's log messages, sets and gets variables by name (or, on a master's hot path, through
+:meth:`FmuInstance.real_writer` / :meth:`FmuInstance.real_reader`, which build their
+value-reference arrays once), and turns a failed call into :class:`FmuError` carrying
 the FMI status and the FMU's own message.
 """
 from __future__ import annotations
@@ -18,7 +19,7 @@ from typing import Iterable, Mapping
 from fmpy import calloc, extract, free, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2Real, fmi2ValueReference)
 
 try:
     from fmpy.logging import addLoggerProxy
@@ -26,6 +27,8 @@ except (ImportError, OSError):  # pragma: no cover - fmpy without its native log
     addLoggerProxy = None
 
 STATUS = ("ok", "warning", "discard", "error", "fatal", "pending")
+#: the worst status a hot-path call may return without raising (fmi2Warning)
+_WARNING = 1
 
 # fmpy's native logger proxy (which formats the FMU's printf-style messages) keeps ONE
 # Python logger for the whole process: the last one registered.  So every instance
@@ -104,12 +107,14 @@ class FmuInstance:
                                  instanceName=self.name)
             self._call("fmi2Instantiate", self.fmu.instantiate, callbacks=self._callbacks,
                        loggingOn=debug_logging)
+            self._do_step = self._raw("fmi2DoStep")
         except BaseException:
             _INSTANCES.pop(self._env, None)
             shutil.rmtree(self._unzip_dir, ignore_errors=True)
             raise
         self._closed = False
         self.time = 0.0
+        self._sets = 0      # counts the calls that set variables (a writer's skip checks it)
 
     # -- logging and errors ------------------------------------------------------------
     def _log(self, env, instance_name, status, category, message):
@@ -142,6 +147,7 @@ class FmuInstance:
 
     def set(self, values: Mapping[str, object] | None = None, **kw) -> None:
         """Set variables by name; each value is converted to the variable's type."""
+        self._sets += 1
         values = dict(values or {}, **kw)
         groups: dict[str, tuple[list, list]] = {}
         for n, value in values.items():
@@ -180,12 +186,64 @@ class FmuInstance:
         return out
 
     def set_real(self, vrs: list[int], values: list[float]) -> None:
-        """Hot-path setter by value reference."""
+        """Set Real variables by value reference."""
+        self._sets += 1
         self._call("fmi2SetReal", self.fmu.setReal, vrs, values)
 
     def get_real(self, vrs: list[int]) -> list[float]:
-        """Hot-path getter by value reference."""
+        """Real variables by value reference."""
         return self._call("fmi2GetReal", self.fmu.getReal, vrs)
+
+    # -- a master's hot path ---------------------------------------------------------------
+    # fmpy's setReal/getReal build both ctypes arrays on every call and pass through its
+    # call logger; a master that sets and gets the same variables every step builds them
+    # once and calls the FMU's function directly.  Errors are raised as by _call.
+    def _raw(self, function: str):
+        return self.fmu._functions[function], self.fmu.component
+
+    def _failed(self, function: str, status: int, first: int) -> FmuError:
+        return FmuError(self.name, function, status, [m for s, m in self.messages[first:] if s >= 1])
+
+    def real_writer(self, vrs: list[int]):
+        """``write(values)``: fmi2SetReal of the Real variables ``vrs`` (value
+        references), with one value per reference, in their order.  Inputs keep
+        their values until set again (FMI 2.0, 4.2.1), so a write of the values this
+        writer wrote last is skipped, unless anything else was set on the instance since."""
+        n = len(vrs)
+        refs, buf = (fmi2ValueReference * n)(*vrs), (fmi2Real * n)()
+        fn, c = self._raw("fmi2SetReal")
+        messages = self.messages
+        last: list = [None, 0]          # the values written last, and self._sets after writing them
+
+        def write(values: list) -> None:
+            if values == last[0] and last[1] == self._sets:
+                return
+            buf[:] = values
+            first = len(messages)
+            status = fn(c, refs, n, buf)
+            if status > _WARNING:
+                last[0] = None
+                raise self._failed("fmi2SetReal", status, first)
+            self._sets += 1
+            last[0], last[1] = list(values), self._sets
+        return write
+
+    def real_reader(self, vrs: list[int]):
+        """``read()``: fmi2GetReal of the Real variables ``vrs`` (value references);
+        returns a ctypes array of their values in that order, overwritten by the next
+        ``read()``."""
+        n = len(vrs)
+        refs, buf = (fmi2ValueReference * n)(*vrs), (fmi2Real * n)()
+        fn, c = self._raw("fmi2GetReal")
+        messages = self.messages
+
+        def read():
+            first = len(messages)
+            status = fn(c, refs, n, buf)
+            if status > _WARNING:
+                raise self._failed("fmi2GetReal", status, first)
+            return buf
+        return read
 
     # -- life cycle ------------------------------------------------------------------------
     def initialize(self, parameters: Mapping[str, object] | None = None, start_time: float = 0.0,
@@ -208,8 +266,12 @@ class FmuInstance:
         self.time += dt
 
     def step_to(self, t: float, dt: float) -> None:
-        """One communication step of ``dt`` [s] from ``t`` (hot path, no bookkeeping)."""
-        self._call("fmi2DoStep", self.fmu.fmi2DoStep, self.fmu.component, t, dt, 1)
+        """One communication step of ``dt`` [s] from ``t`` (hot path)."""
+        fn, c = self._do_step
+        first = len(self.messages)
+        status = fn(c, t, dt, 1)
+        if status > _WARNING:
+            raise self._failed("fmi2DoStep", status, first)
         self.time = t + dt
 
     def close(self) -> None:

@@ -37,6 +37,7 @@ import math
 import sys
 import tempfile
 import time as _time
+from operator import itemgetter
 from pathlib import Path
 from typing import Callable, Mapping
 
@@ -183,13 +184,18 @@ class CoSimulation:
                 incoming[conn.end_element][conn.end_connector] = (src, conn.factor, conn.offset)
         self.n_slots = len(slot)
         self._slot = slot
-        self._in = {n: (self.instances[n].value_references(list(incoming[n])), list(incoming[n].values()))
-                    for n in names}
-        feed = {n: [o for o in self.outputs[n] if o in self.feedthrough[n]] for n in names}
-        self._feed_out = {n: (self.instances[n].value_references(feed[n]), [slot[(n, o)] for o in feed[n]])
-                          for n in names}
-        self._all_out = {n: (self.instances[n].value_references(self.outputs[n]),
-                             [slot[(n, o)] for o in self.outputs[n]]) for n in names}
+        # the hot path's setters and getters (their value-reference arrays built once):
+        # each component's driven inputs, its feedthrough outputs and all its outputs
+        inst = self.instances
+
+        def reader(n: str, outs: list[str]):
+            return (inst[n].real_reader(inst[n].value_references(outs)) if outs else None,
+                    [slot[(n, o)] for o in outs])
+        self._write = {n: (inst[n].real_writer(inst[n].value_references(list(incoming[n])))
+                           if incoming[n] else None, _gather(list(incoming[n].values()))) for n in names}
+        self._feed_read = {n: reader(n, [o for o in self.outputs[n] if o in self.feedthrough[n]])
+                           for n in names}
+        self._all_read = {n: reader(n, self.outputs[n]) for n in names}
         feed_edges = {n: set() for n in names}
         soft_edges = {n: set() for n in names}
         for conn in s.connections:
@@ -203,7 +209,7 @@ class CoSimulation:
             if a != b:
                 (feed_edges if through else soft_edges)[a].add(b)
         self.step_order = _order(names, feed_edges, soft_edges, str(s.path))
-        self._feed_components = [n for n in self.step_order if self._feed_out[n][0]]
+        self._feed_components = [n for n in self.step_order if self._feed_read[n][0]]
         # Integer and Boolean outputs (a bridge's link status) are recorded, not transferred
         self._discrete_out = {}
         for n in names:
@@ -215,14 +221,14 @@ class CoSimulation:
 
     # -- running -------------------------------------------------------------------------
     def _set_inputs(self, name: str, values: list[float]) -> None:
-        vrs, sources = self._in[name]
-        if vrs:
-            self.instances[name].set_real(vrs, [f * values[i] + o for i, f, o in sources])
+        write, sources = self._write[name]
+        if write is not None:
+            write(sources(values))
 
     def _read(self, name: str, which: dict, values: list[float]) -> None:
-        vrs, slots = which[name]
-        if vrs:
-            for i, v in zip(slots, self.instances[name].get_real(vrs)):
+        read, slots = which[name]
+        if read is not None:
+            for i, v in zip(slots, read()):
                 values[i] = v
 
     def simulate(self, stop_time: float | None = None, inputs=None, start_time: float | None = None,
@@ -262,9 +268,12 @@ class CoSimulation:
         for name, i in self._input_slot.items():
             values[i] = self._input_start(name)
         for n in self.instances:
-            self._read(n, self._all_out, values)
+            self._read(n, self._all_read, values)
         columns, record = self._recording()
         rows = np.empty((n_steps + 1, len(columns)))
+        m = len(record)
+        take = itemgetter(*(i for i, _, _ in record)) if m > 1 else (lambda v: [v[record[0][0]]] if m else [])
+        scaled = [(j, f, o) for j, (_, f, o) in enumerate(record, start=1) if (f, o) != (1.0, 0.0)]
         bar = _Progress(t_end - t0, progress)
         input_slots = [(name, self._input_slot[name]) for name in self.inputs]
         feed_buffer = list(values)
@@ -285,11 +294,12 @@ class CoSimulation:
                     row_values = feed_buffer
                 for n in self._feed_components:
                     self._set_inputs(n, row_values)
-                    self._read(n, self._feed_out, row_values)
+                    self._read(n, self._feed_read, row_values)
             rows[k, 0] = t
-            for j, (i, f, o) in enumerate(record, start=1):
-                rows[k, j] = f * row_values[i] + o
-            j = len(record) + 1
+            rows[k, 1:m + 1] = take(row_values)
+            for j, f, o in scaled:
+                rows[k, j] = f * rows[k, j] + o
+            j = m + 1
             for (n, typ), (vrs, _) in self._discrete_out.items():
                 fmu = self.instances[n].fmu
                 got = fmu.getInteger(vrs) if typ == "Integer" else fmu.getBoolean(vrs)
@@ -311,12 +321,12 @@ class CoSimulation:
                     for n in order:
                         instances[n].step_to(t_k, dt)
                     for n in order:
-                        self._read(n, self._all_out, values)
+                        self._read(n, self._all_read, values)
                 else:
                     for n in order:
                         self._set_inputs(n, values)
                         instances[n].step_to(t_k, dt)
-                        self._read(n, self._all_out, values)
+                        self._read(n, self._all_read, values)
                 take_inputs(t_next)
                 record_row(k + 1, t_next)
                 if monitor is not None:
@@ -406,6 +416,15 @@ def check_shared(structure: SystemStructure, instances: Mapping[str, FmuInstance
                 listed = ", ".join(f"{c}.{name} = {v:g}" for c, v in seen.items() if c in (a, b))
                 raise SspError(f"{name} is one quantity of the machine but the components disagree: {listed}; "
                                f"set every one of them")
+
+
+def _gather(sources: list[tuple[int, float, float]]) -> Callable[[list[float]], list[float]]:
+    """``values -> [f * values[i] + o for each (i, f, o) in sources]``, an item getter
+    where every connection is one to one (factor 1, offset 0)."""
+    if len(sources) > 1 and all((f, o) == (1.0, 0.0) for _, f, o in sources):
+        get = itemgetter(*(i for i, _, _ in sources))
+        return lambda values: list(get(values))
+    return lambda values: [f * values[i] + o for i, f, o in sources]
 
 
 def _as_list(parameters) -> list:
