@@ -26,7 +26,12 @@ Three stages, as the boom's (``identify.fit``):
    the position low-passed at the preparation's cut-off and every term then passed
    through the same zero-phase state-variable filter G; rows of every joint of every
    recording stacked, each joint weighted by the inverse of its residual's spread
-   (two passes), samples near an impact on a stop left out.  Intervals from a
+   (two passes), samples near an impact on a stop left out, and those within
+   ``TRANSITION_REACH`` periods of G of a start or a stop: D0 comes from motion
+   filtered at the preparation's cut-off, whose inertia at a start or a stop spreads
+   to both sides of it, and the sliding indicator cuts the resting side's share (the
+   mask is needed: at rest the acceleration's noise times the joint's mass, 600 kg and
+   more on the swing, would swamp its friction).  Intervals from a
    moving-block bootstrap, widened by ``fit.SYSTEMATIC``.
 2. **Static friction from every start** per joint: each joint becomes an equivalent
    single cylinder (unit areas, the net force on it of everything but its own
@@ -48,6 +53,11 @@ from .preprocess import CUTOFF, Prepared, lowpass
 JOINTS = exc.JOINTS
 #: Cut-off [Hz] of the state-variable filter G of the equation error (the boom's EE_CUTOFF).
 EE_CUTOFF = 10.0
+#: Periods of EE_CUTOFF around each start and stop whose rows stage 1 leaves out.  G's
+#: impulse response (zero-phase, second order) holds 94 % of its weight within half a
+#: period and its step response is within 3 % of the step from a third of one on; a
+#: whole period (99 %) leaves short slides too few rows (docs/excavator.md)
+TRANSITION_REACH = 0.5
 #: Parameters per joint, and the payload's name.
 JOINT_PARAMS = ("K_v", "F_s", "F_d")
 UNITS = {"K_v": "N.s/m", "F_s": "N", "F_d": "N", "payload": "kg"}
@@ -160,6 +170,12 @@ def equation_rows(joints: list[JointData], cutoff: float = EE_CUTOFF):
         use[:reach] = use[-reach:] = False
         for k in modes.impacts:
             use[max(0, k - reach):k + reach] = False
+        # a start or a stop: D0 comes from filtered motion, whose spread across the change
+        # (the inertia of a start or a stop, half of it on the resting side) the sliding
+        # indicator cuts; G carries that cut to the rows within its reach, which are left out
+        near = int(TRANSITION_REACH * p.fs / cutoff)
+        for k in np.flatnonzero(np.diff(modes.sliding.astype(np.int8)) != 0) + 1:
+            use[max(0, k - near):k + near] = False
         Xs.append(X)
         ys.append(y)
         uses.append(use)
