@@ -272,8 +272,7 @@ class CoSimulation:
         columns, record = self._recording()
         rows = np.empty((n_steps + 1, len(columns)))
         m = len(record)
-        take = itemgetter(*(i for i, _, _ in record)) if m > 1 else (lambda v: [v[record[0][0]]] if m else [])
-        scaled = [(j, f, o) for j, (_, f, o) in enumerate(record, start=1) if (f, o) != (1.0, 0.0)]
+        take = _gather(record)
         bar = _Progress(t_end - t0, progress)
         input_slots = [(name, self._input_slot[name]) for name in self.inputs]
         feed_buffer = list(values)
@@ -297,8 +296,6 @@ class CoSimulation:
                     self._read(n, self._feed_read, row_values)
             rows[k, 0] = t
             rows[k, 1:m + 1] = take(row_values)
-            for j, f, o in scaled:
-                rows[k, j] = f * rows[k, j] + o
             j = m + 1
             for (n, typ), (vrs, _) in self._discrete_out.items():
                 fmu = self.instances[n].fmu
@@ -419,8 +416,9 @@ def check_shared(structure: SystemStructure, instances: Mapping[str, FmuInstance
 
 
 def _gather(sources: list[tuple[int, float, float]]) -> Callable[[list[float]], list[float]]:
-    """``values -> [f * values[i] + o for each (i, f, o) in sources]``, an item getter
-    where every connection is one to one (factor 1, offset 0)."""
+    """``values -> [f * values[i] + o for each (i, f, o) in sources]`` (a component's
+    inputs from their connections, a recorded row from its columns' slots), an item
+    getter where every one is one to one (factor 1, offset 0)."""
     if len(sources) > 1 and all((f, o) == (1.0, 0.0) for _, f, o in sources):
         get = itemgetter(*(i for i, _, _ in sources))
         return lambda values: list(get(values))
