@@ -2,7 +2,8 @@
 # Create .venv (Python 3.11) with boomfmi and its test dependencies, install the virtual
 # view's browser libraries (three.js, uPlot) with npm, and build the FMUs.  With
 # --browser, also Debian's chromium and chromium-driver for the view's browser test.
-# As root with apt-get, also Debian's mingw-w64 for the FMUs' win64 status shim.
+# As root with apt-get, also Debian's mingw-w64 for the FMUs' win64 status shim and
+# valgrind for the FMUs' clean-exit test.
 # Idempotent: reinstalls only when pyproject.toml or the lock file changed;
 # build_fmus.py always runs (a few seconds) so the FMUs match the sources.
 set -euo pipefail
@@ -64,6 +65,21 @@ if ! command -v x86_64-w64-mingw32-gcc >/dev/null 2>&1; then
     else
         echo "bootstrap: x86_64-w64-mingw32-gcc is missing and cannot be installed here (needs root" \
              "and apt-get); the FMUs' win64 binary stays pythonfmu's own" >&2
+    fi
+fi
+
+# valgrind checks that a plain C host exits cleanly with the FMUs (tests/test_travel.py,
+# benchmarks/fmu_travel.py --valgrind); without it that test is skipped.
+if ! command -v valgrind >/dev/null 2>&1; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+        echo "bootstrap: installing Debian's valgrind (the FMUs' clean-exit test)"
+        export DEBIAN_FRONTEND=noninteractive
+        apt-get install -y -qq valgrind >/dev/null 2>&1 ||
+            { apt-get update -qq && apt-get install -y -qq valgrind >/dev/null; } ||
+            echo "bootstrap: could not install valgrind; the FMUs' valgrind test will be skipped" >&2
+    else
+        echo "bootstrap: valgrind is missing and cannot be installed here (needs root and apt-get);" \
+             "the FMUs' valgrind test will be skipped" >&2
     fi
 fi
 

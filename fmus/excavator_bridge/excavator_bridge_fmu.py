@@ -228,7 +228,7 @@ class ExcavatorBridge(BoomSlave):
         self._losses = 0
         self._show(sample)
 
-    def terminate(self):
+    def teardown(self):
         if self._client is not None:
             self._client.close()
             self._client = None

@@ -93,6 +93,16 @@ def _positive(text: str) -> float:
     return value
 
 
+def _watchdog(text: str) -> float:
+    """An argparse type: the rig's watchdog, > 0 and at most ``rig.server.MAX_WATCHDOG`` s."""
+    from .rig.server import MAX_WATCHDOG
+    value = _positive(text)
+    if value > MAX_WATCHDOG:
+        raise argparse.ArgumentTypeError(f"{text} s is beyond the longest watchdog, {MAX_WATCHDOG:g} s: "
+                                         f"the fail-safe would in effect be off")
+    return value
+
+
 def _value(text: str):
     """A ``--set`` value: an integer, a real, true/false, or else a string."""
     for cast in (int, float):
@@ -103,10 +113,21 @@ def _value(text: str):
     return {"true": True, "false": False}.get(text.lower(), text)
 
 
+def _not_inputs(outputs, files=(), recordings=()) -> None:
+    """Refuse (``outputs.OutputError``) an output that is one of the command's input
+    ``files`` or ``recordings`` (or a recording's sidecar), by name or through links."""
+    from .outputs import check_not_inputs
+    from .recording import recording_inputs
+    check_not_inputs(outputs, [*(Path(f) for f in files if f), *recording_inputs(recordings)])
+
+
 def _simulate(args) -> int:
     from .simulate import run_experiment
     if args.out.is_dir():
         raise IsADirectoryError(f"{args.out}: Is a directory; --out names the CSV file to write")
+    experiment = Path(args.experiment)
+    _not_inputs([args.out], [args.ssp, *args.params, args.key_file],
+                [experiment] if experiment.suffix.lower() == ".csv" or experiment.exists() else [])
     given = {}
     for item in args.set:
         name, eq, value = item.partition("=")
@@ -129,7 +150,7 @@ def _simulate(args) -> int:
                             [*args.params, given] if given else args.params, progress=True,
                             view=args.view, view_key=view_key)
     from .outputs import OutputSet
-    with OutputSet(args.out.parent) as files:          # an interrupt leaves the old file whole
+    with OutputSet(args.out.parent) as files:          # an interrupt leaves the old file whole; locked
         result.to_csv(files.path(args.out.name), index=False, float_format="%.10g")
     last = result.iloc[-1]
     if "x" not in result:                              # the whole excavator's columns
@@ -180,6 +201,8 @@ def _rig_serve(args) -> int:
     from .link.protocol import load_key
     from .rig import make_rig
     from .rig.server import realtime_priority, serve
+    if args.record:
+        _not_inputs([args.record], [args.config, args.key_file])
     key = load_key(args.key_file)
     plant = make_rig(args.config)       # the boom's, or the excavator's ("machine": "excavator")
     if args.priority:
@@ -197,6 +220,7 @@ def _rig_serve(args) -> int:
 
 def _record(args) -> int:
     from .record import record_experiment
+    _not_inputs([args.out], [args.fmu, args.key_file])
     stats = record_experiment(args.fmu, args.rig, args.out, args.experiment, args.step, args.stop,
                               args.key_file, args.timeout, args.retries, args.loss_budget)
     print(f"wrote {args.out}: {stats['rows']} rows, {stats['lost_packets']} answers lost")
@@ -205,6 +229,11 @@ def _record(args) -> int:
 
 def _identify(args) -> int:
     from .recording import common_kind
+    if args.out.is_dir():
+        raise IsADirectoryError(f"{args.out}: is a folder; --out names params.json (params.ssv and params.png "
+                                f"go beside it)")
+    _not_inputs([args.out, args.out.with_suffix(".ssv"), args.out.with_suffix(".png")],
+                recordings=[*args.recordings, *args.holdout])
     if common_kind([*args.recordings, *args.holdout]) == "excavator":
         return _identify_excavator(args)
     from .identify import identify_recordings, write_outputs
@@ -238,7 +267,9 @@ def _identify_excavator(args) -> int:
 
 
 def _diagnose(args) -> int:
+    from .diagnose.report import OUTPUTS
     from .recording import common_kind
+    _not_inputs([args.out / name for name in OUTPUTS], [args.ssp], [*args.recordings, *args.holdout])
     if common_kind([*args.recordings, *args.holdout]) == "excavator":
         return _diagnose_excavator(args)
     from .diagnose import diagnose
@@ -281,10 +312,20 @@ def _diagnose_excavator(args) -> int:
     return 0
 
 
+#: Run in each worker process of campaign's local cluster as it starts (Dask's worker
+#: preload, as script text): Ctrl-C reaches the whole process group, and only this
+#: process answers it (it cancels the cases, closes the cluster and says "interrupted");
+#: a worker that took it too would print its own KeyboardInterrupt traceback.
+_WORKER_IGNORES_SIGINT = "import signal\nsignal.signal(signal.SIGINT, signal.SIG_IGN)\n"
+
+
 def _campaign(args) -> int:
+    import dask
+
     from .campaign import run_campaign
-    doc = run_campaign(args.manifest, args.out, scheduler=args.scheduler, workers=args.workers, ssp=args.ssp,
-                       progress=lambda text: print(text, end="", file=sys.stderr, flush=True))
+    with dask.config.set({"distributed.worker.preload": [_WORKER_IGNORES_SIGINT]}):
+        doc = run_campaign(args.manifest, args.out, scheduler=args.scheduler, workers=args.workers, ssp=args.ssp,
+                           progress=lambda text: print(text, end="", file=sys.stderr, flush=True))
     run = doc["run"]
     for m, info in doc["machines"].items():
         last = info["last"]
@@ -294,6 +335,8 @@ def _campaign(args) -> int:
         print(f"{m}: last {last['date']} {verdict}; {flags}")
     print(f"{run['cases']} cases: {run['ran']} run, {run['resumed']} done before, {run['failed']} failed "
           f"({run['wall_s']:.0f} s on {run['worker_threads']} worker thread(s) at {run['address']})")
+    for worker, why in (run.get("workers_lost") or {}).items():
+        print(f"worker lost: {worker} ({why}); the cases it held went back to the scheduler (their attempts: campaign.json)")
     print(f"wrote {args.out}/campaign.json, {args.out}/campaign.html and {args.out}/cases/")
     return 1 if run["failed"] else 0
 
@@ -402,7 +445,7 @@ def main(argv=None) -> int:
     p.add_argument("--experiment", default="paper_multistep",
                    help="a named command profile (paper_multistep) or a recording whose u drives the valve")
     p.add_argument("--step", type=float, default=1e-3, help="communication step [s] (default 0.001)")
-    p.add_argument("--stop", type=float, default=None, help="stop time [s] (default: the experiment's end)")
+    p.add_argument("--stop", type=_positive, default=None, help="stop time [s] (default: the experiment's end)")
     p.add_argument("--params", type=Path, action="append", default=[],
                    help="a parameter set (.ssv, names like valve.A_max) applied after the SSP's own; repeatable")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
@@ -429,7 +472,8 @@ def main(argv=None) -> int:
     p.add_argument("--record", type=Path, help="write every measured sample to this recording")
     p.add_argument("--config", type=Path, help="JSON: effects, noise, contact, parameters (default: reference rig, noise on)")
     p.add_argument("--key-file", help="file holding the shared link key (default: $BOOMFMI_LINK_KEY)")
-    p.add_argument("--watchdog", type=_positive, default=0.05, help="fail-safe after this long without a command [s]")
+    p.add_argument("--watchdog", type=_watchdog, default=0.05,
+                   help="fail-safe after this long without a command [s], at most 10 (default 0.05)")
     p.add_argument("--priority", type=int, default=0, metavar="N",
                    help="run under the real-time scheduler (SCHED_FIFO) at priority N, 1 to 99 (needs the "
                         "right: root or CAP_SYS_NICE); 0: the normal scheduler (default)")
@@ -562,6 +606,9 @@ def main(argv=None) -> int:
     except (OSError, ValueError, RuntimeError, KeyError, LinkError) as e:
         print(f"boomfmi {args.command}: {e}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:            # Ctrl-C, SIGINT: every command says so, no traceback, 128 + 2
+        print(f"\nboomfmi {args.command}: interrupted", file=sys.stderr, flush=True)
+        return 130
 
 
 if __name__ == "__main__":

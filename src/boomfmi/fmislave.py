@@ -18,6 +18,14 @@ for FMI 3.0 the shim of ``boomfmi/fmubuild/fmi3.py``).  pythonfmu and pythonfmu3
 any Python exception into ``fmi2Fatal``/``fmi3Fatal`` and free the instance's Python
 object, which leaves the host nothing to recover.
 
+The instance follows the FMI co-simulation state machine (FMI 2.0 section 4.2.4): a
+step before or during initialisation, after ``fmi2Terminate`` or from a communication
+point other than where the last step ended, a second ``fmi2Terminate`` and a fixed
+parameter set after ``fmi2ExitInitializationMode`` are refused with fmi2Error and a
+message, leaving the instance as it was.  No value leaves it as fmi2OK unless it is
+finite: a step with an input that is not finite is refused naming the input, and so is
+reading an output that depends on it directly.
+
 An FMU's effect options (the catalogue's parameters of the effects that are its
 options) are declared by :func:`effect_options` from ``model/catalogue.py``, not here.
 
@@ -51,6 +59,27 @@ else:
     from pythonfmu.enums import Fmi2Initial as Initial, Fmi2Status as Status
     #: pythonfmu makes False fmi2Discard; the status shim raises it to the logged fmi2Error
     _STEP_FAILED = False
+
+#: The prefix of the FMI functions' names in messages: fmi2DoStep, fmi3DoStep.
+_FMI = f"fmi{FMI_VERSION}"
+
+# -- the FMI state machine (FMI 2.0 section 4.2.4; FMI 3.0's co-simulation is the same for
+# these calls).  An instance is instantiated, then in initialisation mode, then stepping
+# (after fmi2ExitInitializationMode, also when that failed: the failure refuses the steps),
+# then terminated; fmi2Reset makes a new Python object, in the first state again.
+_INSTANTIATED, _INITIALIZING, _STEPPING, _TERMINATED = range(4)
+#: Why a step is refused in each state but _STEPPING.
+_NO_STEP = {
+    _INSTANTIATED: (f"the instance is not initialised yet (call {_FMI}EnterInitializationMode "
+                    f"and {_FMI}ExitInitializationMode first)"),
+    _INITIALIZING: f"the instance is in initialisation mode (call {_FMI}ExitInitializationMode first)",
+    _TERMINATED: (f"the instance was terminated ({_FMI}Terminate); only {_FMI}Reset or "
+                  f"{_FMI}FreeInstance may follow"),
+}
+#: A step must start where the previous one ended (or, for the first, at the start time),
+#: within this tolerance relative to the time and the step: a host that computes its
+#: communication points as t0 + n h rather than by adding h differs by a few ulps only.
+TIME_RTOL = 1e-9
 
 
 class Variable(NamedTuple):
@@ -142,6 +171,21 @@ def option_values(slave, fmu: str) -> dict:
     return {p.option: getattr(slave, p.option) for e in of_fmu(fmu) for p in e.parameters}
 
 
+def _values_of(names):
+    """A function of an object that returns the tuple of its attributes ``names``."""
+    if len(names) > 1:
+        return attrgetter(*names)
+    if names:
+        return lambda obj, get=attrgetter(names[0]): (get(obj),)
+    return lambda obj: ()
+
+
+def _are(items, noun: str) -> str:
+    """``"input u = nan is"``, ``"inputs u = nan, p_a = inf are"`` (``noun`` may be "")."""
+    plural = len(items) > 1
+    return f"{noun}{'s' if plural and noun else ''}{' ' if noun else ''}{', '.join(items)} {'are' if plural else 'is'}"
+
+
 _TYPES = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
 
 
@@ -162,6 +206,9 @@ class BoomSlave(_FmiSlave):
         self._real_access: dict = {}     # get_real/set_real's resolved names, per value-reference group
         self.start_time = 0.0
         self._time = 0.0        # the last communication point
+        self._stepped = False
+        self._time_known = False    # whether _time is the start time or a step's end (FMI 3.0 has none before its first step)
+        self._fmi_state = _INSTANTIATED
         for var in self.variables:
             owner_attr = getattr(type(self), var.name, None)
             if not isinstance(owner_attr, property):
@@ -184,25 +231,125 @@ class BoomSlave(_FmiSlave):
             self.register_variable(Real("time", causality=Causality.independent,
                                         variability=Variability.continuous,
                                         description="simulation time", getter=lambda: self._time))
+        #: the fixed parameters, by value reference; the Real inputs, read at once by do_step
+        parameters = {v.name for v in self.variables if v.causality == "parameter"}
+        self._fixed = {vr: var.name for vr, var in self.vars.items() if var.name in parameters}
+        inputs = tuple(v.name for v in self.variables if v.causality == "input" and v.type == "Real")
+        self._inputs = _values_of(inputs)
 
     # -- FMI 2.0 Real access, pythonfmu's semantics with the look-ups done once ---------
     # pythonfmu's get_real/set_real look every value reference up, check its type and go
     # through a closure per value on every call; a host sets and gets the same groups
     # of variables every step, so each group's attribute names are resolved once.
+    # Beyond pythonfmu: a value that is not finite is returned with status error (no NaN
+    # leaves the FMU as fmi2OK), and a fixed parameter is refused after initialisation.
     def get_real(self, vrs):
-        get = self._real_access.get(("get", *vrs))
-        if get is None:
-            names = self._real_names(vrs)
-            get = self._real_access[("get", *vrs)] = attrgetter(*names) if len(names) > 1 else (
-                lambda obj, g=attrgetter(names[0]): (g(obj),))
-        return [float(value) for value in get(self)]
+        access = self._real_access.get(("get", *vrs))
+        if access is None:
+            access = self._real_access[("get", *vrs)] = (_values_of(self._real_names(vrs)),
+                                                         self._feedthrough(vrs))
+        get, inputs = access
+        # one sum per call (finite values can overflow it: the report then finds none)
+        if inputs is not None and not math.isfinite(sum(inputs(self))) and self._refuse_feedthrough(vrs):
+            return [math.nan] * len(vrs)
+        values = [float(value) for value in get(self)]
+        if not math.isfinite(sum(values)):
+            self._report_not_finite(vrs, values, f"{_FMI}GetReal")
+        return values
 
     def set_real(self, vrs, values):
-        names = self._real_access.get(("set", *vrs))
-        if names is None:
-            names = self._real_access[("set", *vrs)] = self._real_names(vrs)
+        access = self._real_access.get(("set", *vrs))
+        if access is None:
+            access = self._real_access[("set", *vrs)] = (
+                self._real_names(vrs), tuple(self._fixed[vr] for vr in vrs if vr in self._fixed))
+        names, fixed = access
+        if fixed and self._fmi_state >= _STEPPING:
+            self._refuse_fixed(fixed, f"{_FMI}SetReal")
+            return
         for name, value in zip(names, values):
             setattr(self, name, value)
+
+    if FMI_VERSION == 3:    # pythonfmu3's own access, with the same two checks
+        def get_float64(self, vrs):
+            inputs = self._real_access.get(("inputs", *vrs), False)
+            if inputs is False:
+                inputs = self._real_access[("inputs", *vrs)] = self._feedthrough(vrs)
+            if inputs is not None and not math.isfinite(sum(inputs(self))) and self._refuse_feedthrough(vrs):
+                return [math.nan] * len(vrs)
+            values = super().get_float64(vrs)
+            if not math.isfinite(sum(values)):
+                self._report_not_finite(vrs, values, "fmi3GetFloat64")
+            return values
+
+        def set_float64(self, vrs, values):
+            self._set_checked(super().set_float64, "fmi3SetFloat64", vrs, values)
+
+        def set_int32(self, vrs, values):
+            self._set_checked(super().set_int32, "fmi3SetInt32", vrs, values)
+    else:
+        def set_integer(self, vrs, values):
+            self._set_checked(super().set_integer, "fmi2SetInteger", vrs, values)
+
+    def set_boolean(self, vrs, values):
+        self._set_checked(super().set_boolean, f"{_FMI}SetBoolean", vrs, values)
+
+    def set_string(self, vrs, values):
+        self._set_checked(super().set_string, f"{_FMI}SetString", vrs, values)
+
+    def _set_checked(self, setter, function: str, vrs, values) -> None:
+        """``setter(vrs, values)`` unless ``vrs`` hold a fixed parameter after initialisation."""
+        fixed = tuple(self._fixed[vr] for vr in vrs if vr in self._fixed)
+        if fixed and self._fmi_state >= _STEPPING:
+            self._refuse_fixed(fixed, function)
+        else:
+            setter(vrs, values)
+
+    def _refuse_fixed(self, names, function: str) -> None:
+        """Log a set of fixed parameters ``names`` after initialisation as an error."""
+        when = "was terminated" if self._fmi_state == _TERMINATED else "is initialised"
+        self.log(f"{function} refused: parameter{'s' if len(names) > 1 else ''} {', '.join(names)} "
+                 f"{'are' if len(names) > 1 else 'is'} fixed and can be set only before "
+                 f"{_FMI}ExitInitializationMode, and this instance {when}; nothing was set",
+                 Status.error)
+
+    def _feedthrough(self, vrs):
+        """What reads the Real inputs that outputs ``vrs`` depend on directly (their
+        ``depends``), as a tuple; None when they depend on none."""
+        spec = {v.name: v for v in self.variables}
+        names = {d for vr in vrs if self.vars[vr].name in spec for d in spec[self.vars[vr].name].depends}
+        names = [v.name for v in self.variables if v.name in names and v.type == "Real"]
+        return _values_of(names) if names else None
+
+    def _refuse_feedthrough(self, vrs) -> bool:
+        """Log, as an error, the outputs among ``vrs`` that depend directly on an input
+        that is not finite, naming both; False when there are none."""
+        spec = {v.name: v for v in self.variables}
+        bad = {v.name: value for v, value in zip((v for v in self.variables if v.causality == "input"
+                                                   and v.type == "Real"), self._inputs(self))
+               if not math.isfinite(value)}
+        outputs = [self.vars[vr].name for vr in vrs
+                   if set(getattr(spec.get(self.vars[vr].name), "depends", ())) & set(bad)]
+        if not outputs:
+            return False
+        self.log(f"{_FMI}{'GetFloat64' if FMI_VERSION == 3 else 'GetReal'} refused: "
+                 + _are([f"{n} = {value!r}" for n, value in bad.items()], "input")
+                 + f" not a finite number, and {', '.join(outputs)} depend{'s' if len(outputs) == 1 else ''} "
+                 "on it directly (set a finite value)", Status.error)
+        return True
+
+    def _report_not_finite(self, vrs, values, function: str) -> None:
+        """Log the non-finite ``values`` of ``vrs`` as an error, naming them and the
+        non-finite inputs that made them; nothing when every value is finite."""
+        bad = [f"{self.vars[vr].name} = {value!r}" for vr, value in zip(vrs, values) if not math.isfinite(value)]
+        if bad:
+            inputs = self._inputs_not_finite()
+            self.log(f"{function}: {_are(bad, '')} not a finite number"
+                     + (f" ({_are(inputs, 'input')} not finite)" if inputs else ""), Status.error)
+
+    def _inputs_not_finite(self) -> list:
+        """``["u = nan", "p_a = inf"]``: the Real inputs that are not finite."""
+        names = [v.name for v in self.variables if v.causality == "input" and v.type == "Real"]
+        return [f"{n} = {value!r}" for n, value in zip(names, self._inputs(self)) if not math.isfinite(value)]
 
     def _real_names(self, vrs) -> Tuple[str, ...]:
         """The attribute names of Real variables ``vrs``; TypeError for another type, as
@@ -223,6 +370,9 @@ class BoomSlave(_FmiSlave):
         """Advance the FMU from ``t`` by ``dt`` [s] with the inputs held."""
         raise NotImplementedError
 
+    def teardown(self) -> None:
+        """Release what the FMU holds (a link, a file); called once, by fmi2Terminate."""
+
     # -- FMI plumbing ----------------------------------------------------------------
     def fail(self, message: str) -> None:
         """Report an error: logged with status fmi2Error, every later call fails too."""
@@ -231,10 +381,33 @@ class BoomSlave(_FmiSlave):
         self.log(message, Status.error)
 
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
-        # pythonfmu3 0.3.4 never calls this: an FMI 3.0 instance counts from 0 until its first step
+        # pythonfmu3 0.3.4 never calls this: an FMI 3.0 instance counts from 0 until its
+        # first step, which may start at any time
+        if self._fmi_state != _INSTANTIATED:
+            self.log(f"{_FMI}SetupExperiment refused: it comes before {_FMI}EnterInitializationMode, "
+                     f"and this instance is past it; the start time stays {self.start_time:g} s", Status.error)
+            return
+        if not math.isfinite(start_time):
+            self.log(f"{_FMI}SetupExperiment refused: startTime = {start_time!r} is not a finite number",
+                     Status.error)
+            return
         self.start_time = self._time = float(start_time)
+        self._time_known = True
+
+    def enter_initialization_mode(self):
+        if self._fmi_state != _INSTANTIATED:
+            self.log(f"{_FMI}EnterInitializationMode refused: it comes once, after {_FMI}Instantiate "
+                     f"(or {_FMI}Reset), and this instance is past it", Status.error)
+            return
+        self._fmi_state = _INITIALIZING
 
     def exit_initialization_mode(self):
+        if self._fmi_state != _INITIALIZING:
+            self.log(f"{_FMI}ExitInitializationMode refused: "
+                     + (f"call {_FMI}EnterInitializationMode first" if self._fmi_state == _INSTANTIATED
+                        else "the instance has left initialisation mode already"), Status.error)
+            return
+        self._fmi_state = _STEPPING
         try:
             self._check_declared_bounds()
             self.setup()
@@ -242,6 +415,13 @@ class BoomSlave(_FmiSlave):
             self.fail(str(e))
         except (ValueError, ArithmeticError) as e:
             self.fail(f"initialisation failed: {e}")
+
+    def terminate(self):
+        if self._fmi_state == _TERMINATED:
+            self.log(f"{_FMI}Terminate refused: the instance was terminated already", Status.error)
+            return
+        self._fmi_state = _TERMINATED
+        self.teardown()
 
     def _check_declared_bounds(self) -> None:
         """Reject a Real parameter that is not finite or lies outside its declared min/max."""
@@ -262,16 +442,40 @@ class BoomSlave(_FmiSlave):
                     raise ParameterError(q.option, value, f"must be 0 (off) or at least {q.on_min:g} {q.unit}")
 
     def do_step(self, current_time, step_size):
+        # The refusals below leave the instance as it was (its time, its state): the host
+        # may call what the message says, or set finite inputs, and step again.
+        if self._fmi_state != _STEPPING:
+            self.log(f"{_FMI}DoStep refused at t = {current_time:g} s: {_NO_STEP[self._fmi_state]}", Status.error)
+            return _STEP_FAILED
         if self.failure is not None:
             self.log(f"cannot step: {self.failure}", Status.error)
             return _STEP_FAILED
-        if not step_size > 0.0:
-            self.fail(f"communication step size must be > 0, got {step_size!r}")
+        if not 0.0 < step_size < math.inf:
+            self.fail(f"communication step size must be a finite number > 0, got {step_size!r}")
             return _STEP_FAILED
+        if self._time_known:
+            if current_time != self._time and not (abs(current_time - self._time)
+                                                   <= TIME_RTOL * (abs(self._time) + step_size)):
+                self.log(f"{_FMI}DoStep refused: currentCommunicationPoint = {current_time!r} s, but "
+                         + (f"the last step ended at {self._time!r} s" if self._stepped
+                            else f"the experiment starts at {self._time!r} s")
+                         + " (a step starts where the previous one ended); nothing was stepped", Status.error)
+                return _STEP_FAILED
+        elif not math.isfinite(current_time):
+            self.log(f"{_FMI}DoStep refused: currentCommunicationPoint = {current_time!r} is not a finite number",
+                     Status.error)
+            return _STEP_FAILED
+        if not math.isfinite(sum(self._inputs(self))):  # finite inputs can overflow the sum
+            inputs = self._inputs_not_finite()
+            if inputs:
+                self.log(f"{_FMI}DoStep refused at t = {current_time:g} s: {_are(inputs, 'input')} not a "
+                         "finite number; nothing was stepped (set a finite value and step again)", Status.error)
+                return _STEP_FAILED
         try:
             self.step(current_time, step_size)
         except (ValueError, ArithmeticError) as e:
             self.fail(f"step at t = {current_time:g} s failed: {e}")
             return _STEP_FAILED
         self._time = current_time + step_size
+        self._time_known = self._stepped = True
         return True

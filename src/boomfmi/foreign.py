@@ -35,7 +35,6 @@ columns are missing where they do not.
 from __future__ import annotations
 
 import csv
-import os
 import re
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -43,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .outputs import OutputSet, check_not_inputs
 from .physics import reference_rig
 from .recording import OPTIONAL, REQUIRED, RecordingError, read_recording, write_recording
 
@@ -114,6 +114,10 @@ class ForeignTable:
 
     def has(self, name: str) -> bool:
         return name in self.columns
+
+    def entry_text(self, name: str) -> str:
+        """The map entry of ``name`` as written, quoted (``'x=5:m'``), for messages."""
+        return next((repr(e.text) for e in self.entries if e.name == name), repr(name))
 
     def gauge(self, chamber: str = "") -> np.ndarray:
         """A pressure as gauge [Pa]: ``p`` (chamber="") or ``p_a``/``p_b``, from its
@@ -336,6 +340,11 @@ def _formats(entries, decimal, thousands, delim) -> dict:
     return out
 
 
+#: A number whose digits are grouped in threes by one separator used at least twice
+#: (``1.002.000``, ``1,002,000``, ``1'002'000``): it can only be a thousands separator.
+_GROUPED = re.compile(r"[+-]?\d{1,3}(([.,' ])\d{3})(\2\d{3})+([.,]\d*)?")
+
+
 def _convert(texts, numbers, entry: MapEntry, path, pattern, decimal, thousands) -> np.ndarray:
     if pattern is None:
         try:
@@ -353,6 +362,10 @@ def _convert(texts, numbers, entry: MapEntry, path, pattern, decimal, thousands)
                 hint = ""
                 if pattern is not None:
                     hint = f" (with --decimal {decimal!r}" + (f" and --thousands {thousands!r})" if thousands else ")")
+                elif _GROUPED.fullmatch(s.strip()):
+                    sep = _GROUPED.fullmatch(s.strip()).group(2)
+                    hint = (f" (digits grouped by {sep!r}: thousands separators? give --thousands {sep}, or "
+                            f"--thousands {entry.name}={sep} for this column only)")
                 elif "," in s:
                     hint = " (a decimal comma? give --decimal ,)"
                 raise RecordingError(path, f"{s.strip()!r} is not a number{hint} ({entry.name}, map entry "
@@ -431,22 +444,20 @@ def import_recording(path, out, opts: dict, P_atm: float = reference_rig.P_atm) 
     """Convert a foreign file into a recording at ``out``: read it with ``opts``
     (:func:`read_options`), write it in the recording format and read it back through
     :func:`~boomfmi.recording.read_recording`; a fault found there is reported at the
-    foreign file's own line.  Nothing is left at ``out`` on an error."""
+    foreign file's own line.  Nothing is left at ``out`` on an error, and an existing
+    ``out`` is as it was.  ``out`` may not be the foreign file (nor a link to it), and
+    is locked while it is written (``outputs.OutputSet``)."""
+    out = Path(out)
+    check_not_inputs([out], [Path(path)])
     table = read_with(path, opts, P_atm)
     frame = recording_frame(table)
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.partial-{os.getpid()}")
-    try:
+    with OutputSet(out.parent, inputs=[Path(path)]) as files:
+        tmp = files.path(out.name)
         write_recording(tmp, frame)
         try:
             read_recording(tmp)
         except RecordingError as e:
             raise _at_source(e, table) from None
-        os.replace(tmp, out)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return out
 
 
@@ -477,3 +488,27 @@ def increasing_time(table: ForeignTable) -> np.ndarray:
         raise RecordingError(table.path, f"time does not increase ({t[i - 1]!r} s, then {t[i]!r} s; map entry "
                                          f"{entry.text!r})", row=int(table.lines[i]), column=entry.label)
     return t
+
+
+def check_time_scale(table: ForeignTable, t: np.ndarray, what: str, spacing: tuple[float, float],
+                     duration: tuple[float, float] | None = None) -> None:
+    """RecordingError where the samples' median spacing lies outside ``spacing`` [s] or
+    the run's length outside ``duration`` [s] (``what``: "friction test", "leak-down
+    run"): the map's unit of t is not the file's (s for ms or us, ms for s), and the
+    message names the map entry and the option that fixes it."""
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else spacing[0]
+    span = float(t[-1] - t[0])
+    label = next((e.label for e in table.entries if e.name == "t"), None)
+    fault = None
+    if not spacing[0] <= dt <= spacing[1]:
+        fault = (f"the samples are {dt:g} s apart (median), and a {what}'s are {spacing[0]:g} to {spacing[1]:g} s "
+                 f"apart", dt > spacing[1])
+    elif duration is not None and not duration[0] <= span <= duration[1]:
+        fault = (f"the {what} lasts {span:g} s ({span / 86400:.3g} days), and a {what} lasts {duration[0]:g} to "
+                 f"{duration[1]:g} s", span > duration[1])
+    if fault is not None:
+        text, long = fault
+        way = "smaller unit than the map's (ms or us where it says s?)" if long else \
+            "larger unit than the map's (s or ms where it says ms or us?)"
+        raise RecordingError(table.path, f"{text}: is the file's time in a {way} Give t's unit in --map (map "
+                                         f"entry {table.entry_text('t')}), e.g. t=COLUMN:ms", column=label)

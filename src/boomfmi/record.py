@@ -13,6 +13,7 @@ excavator recording's columns (:data:`EXCAVATOR_COLUMNS`).
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from .experiments import EXCAVATOR_PROFILES, JOINTS, excavator_profile, profile
@@ -38,6 +39,50 @@ EXCAVATOR_OUTPUTS = (tuple(f"u_applied_{j}" for j in JOINTS) + _MEASURED
 #: The bridges' default places.
 FMU = Path("build/fmus/hardware_bridge.fmu")
 EXCAVATOR_FMU = Path("build/fmus/excavator_bridge.fmu")
+#: The most steps a run may have: an hour at the DAQ's 1 kHz (the largest recording the
+#: reader takes, ``recording.MAX_BYTES``, holds about that much).
+MAX_STEPS = 3_600_000
+
+
+def steps(step, stop) -> int:
+    """The number of steps of a run of ``stop`` seconds at ``step`` seconds each; a
+    ValueError naming the option unless both are finite and > 0, ``step`` is at most
+    ``stop`` and the run has at most :data:`MAX_STEPS` steps."""
+    for option, value in (("--step", step), ("--stop", stop)):
+        try:
+            good = math.isfinite(float(value)) and float(value) > 0
+        except (TypeError, ValueError):
+            good = False
+        if not good:
+            raise ValueError(f"{option} {value!r}: must be a finite number of seconds > 0")
+    step, stop = float(step), float(stop)
+    if step > stop:
+        raise ValueError(f"--step {step:g} s is longer than --stop {stop:g} s: the run would have no step")
+    n = int(round(stop / step))
+    if n > MAX_STEPS:
+        raise ValueError(f"--stop {stop:g} s at --step {step:g} s is {n} steps: at most {MAX_STEPS} "
+                         f"(an hour at the DAQ's 1 kHz); a longer step or a shorter run")
+    return n
+
+
+def _kept(e: Exception, w: RecordingWriter) -> None:
+    """Say in the failed run's error that the recording it would have replaced is kept."""
+    if w.replacing and e.args:
+        rows = (f"this run's {w.rows} rows are kept in {w.kept_path}, marked incomplete" if w.rows
+                else "this run recorded no row")
+        e.args = (f"{e.args[0]}; the existing {w.path} is left as it was ({rows})", *e.args[1:])
+
+
+def _interrupted(e: BaseException) -> bool:
+    """Whether ``e`` is an interrupt (Ctrl-C, SIGINT): a KeyboardInterrupt, or the bridge
+    FMU's error for one raised inside its step (its Python code runs in this process,
+    gets the signal, and its FMI call returns fmi2Error naming it)."""
+    return isinstance(e, KeyboardInterrupt) or (isinstance(e, FmuError) and "KeyboardInterrupt" in str(e))
+
+
+def _inputs(fmu, key_file) -> list:
+    """The run's input files, which the recording may not be."""
+    return [Path(fmu), *([Path(key_file)] if key_file else [])]
 
 
 def record_experiment(fmu, rig: str, out, experiment: str = "paper_multistep", step: float = 1e-3,
@@ -49,12 +94,17 @@ def record_experiment(fmu, rig: str, out, experiment: str = "paper_multistep", s
     (:func:`record_excavator_experiment`, to which it then hands over)
     ``build/fmus/excavator_bridge.fmu``.
 
+    ``step`` and ``stop_time`` are checked (:func:`steps`) before anything is opened.
     Nothing is written, and an existing ``out`` is left as it was, until the rig has
     answered (the bridge's handshake brings the first sample).  From then on rows are
     written as they come, and the sidecar says ``incomplete`` until the run ends well:
     a recorder killed mid-run leaves its rows and that mark; a link that fails ends the
     run with :class:`FmuError` after every row received is written and the sidecar
-    names why.  Returns the bridge's link figures (``lost_packets``, ``rows``).
+    names why.  Where ``out`` exists already, the rows go beside it and replace it only
+    when the run has ended well (``recording.RecordingWriter``): a failed, interrupted
+    or killed run leaves it as it was.  ``out`` is locked while it is written
+    (``outputs.OutputError`` for a second writer) and may not be the FMU or key file.
+    Returns the bridge's link figures (``lost_packets``, ``rows``).
     """
     if experiment in EXCAVATOR_PROFILES:
         return record_excavator_experiment(EXCAVATOR_FMU if fmu is None else fmu, rig, out, experiment, step,
@@ -62,7 +112,7 @@ def record_experiment(fmu, rig: str, out, experiment: str = "paper_multistep", s
     fmu = FMU if fmu is None else fmu
     command = profile(experiment)
     stop = command.duration if stop_time is None else stop_time
-    n = int(round(stop / step))
+    n = steps(step, stop)                               # before anything is opened
     parameters = dict(mode="udp", rig=rig, key_file=str(key_file or ""), timeout=timeout,
                       retries=retries, loss_budget=loss_budget)
     notes = {"notes": f"recorded from {rig}, experiment {experiment}"}
@@ -71,17 +121,22 @@ def record_experiment(fmu, rig: str, out, experiment: str = "paper_multistep", s
         bridge.initialize(parameters, start_time=0.0, stop_time=stop, inputs={"u": command(0.0)["u"]})
         y = bridge.get(*OUTPUTS)                        # the sample at t_0: the rig has answered
         with RecordingWriter(out, COLUMNS, sidecar={**notes, "incomplete": "the recorder did not finish "
-                                                    "(killed or still running)"}) as w:
+                                                    "(killed or still running)"},
+                             inputs=_inputs(fmu, key_file)) as w:
             for k in range(n):
                 t = k * step
                 u = command(t)["u"]
                 bridge.set(u=u)
                 try:
                     bridge.step_to(t, step)
-                except FmuError as e:
+                except (FmuError, KeyboardInterrupt) as e:
                     w.write((t, u, y["p_a"], y["p_b"], y["alpha"], y["f_ext"], y["x"], u, 0.0,
                              float(y["failsafe"]), y["t_rig"]))
+                    if _interrupted(e):
+                        w.set_sidecar({**notes, "incomplete": f"interrupted at t = {t:g} s (Ctrl-C or SIGINT)"})
+                        raise KeyboardInterrupt from None
                     w.set_sidecar({**notes, "incomplete": f"the link failed at t = {t:g} s: {e}"})
+                    _kept(e, w)
                     raise
                 nxt = bridge.get(*OUTPUTS)              # u_applied: what the valve got over [t_k, t_k+1)
                 w.write((t, nxt["u_applied"], y["p_a"], y["p_b"], y["alpha"], y["f_ext"], y["x"], u,
@@ -105,7 +160,7 @@ def record_excavator_experiment(fmu, rig: str, out, experiment: str = "digging_c
     there).  Returns ``{"rows", "lost_packets"}``."""
     command = excavator_profile(experiment)
     stop = command.duration if stop_time is None else stop_time
-    n = int(round(stop / step))
+    n = steps(step, stop)                               # before anything is opened
     parameters = dict(mode="udp", rig=rig, key_file=str(key_file or ""), timeout=timeout,
                       retries=retries, loss_budget=loss_budget)
     notes = {"notes": f"recorded from {rig}, excavator experiment {experiment}"}
@@ -124,16 +179,21 @@ def record_excavator_experiment(fmu, rig: str, out, experiment: str = "digging_c
                           inputs={f"u_{j}": u for j, u in zip(JOINTS, cmds(0.0))})
         y = bridge.get(*EXCAVATOR_OUTPUTS)
         with RecordingWriter(out, EXCAVATOR_COLUMNS, sidecar={**notes, "incomplete": "the recorder did not finish "
-                                                              "(killed or still running)"}) as w:
+                                                              "(killed or still running)"},
+                             inputs=_inputs(fmu, key_file)) as w:
             for k in range(n):
                 t = k * step
                 u = cmds(t)
                 bridge.set(**{f"u_{j}": c for j, c in zip(JOINTS, u)})
                 try:
                     bridge.step_to(t, step)
-                except FmuError as e:
+                except (FmuError, KeyboardInterrupt) as e:
                     w.write(row(t, u, y, u, 0.0))
+                    if _interrupted(e):
+                        w.set_sidecar({**notes, "incomplete": f"interrupted at t = {t:g} s (Ctrl-C or SIGINT)"})
+                        raise KeyboardInterrupt from None
                     w.set_sidecar({**notes, "incomplete": f"the link failed at t = {t:g} s: {e}"})
+                    _kept(e, w)
                     raise
                 nxt = bridge.get(*EXCAVATOR_OUTPUTS)       # u_applied: what the valves got over [t_k, t_k+1)
                 w.write(row(t, [nxt[f"u_applied_{j}"] for j in JOINTS], y, u, float(y["link_ok"])))

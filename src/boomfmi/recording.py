@@ -24,14 +24,19 @@ import io
 import json
 import math
 import os
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .physics import Valve, reference_rig
+from .physics import Cylinder, Geometry, Valve, alpha_from_x, reference_rig
 from .physics.excavator import JOINTS
+from .physics import (Gas, Load, ParameterError, check_cylinder, check_gas, check_geometry, check_load,
+                      check_valve)
+from .physics.params import L_MAX
+from .physics.validation import require_positive
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -73,6 +78,17 @@ UNITS = {"t": "s", "u": "V", "p_a": "Pa (gauge)", "p_b": "Pa (gauge)", "alpha": 
          "f_tip_x": "N", "f_tip_y": "N", "f_tip_z": "N"}
 #: The largest joint angle a recording may hold [rad]: beyond it, the angles are in degrees.
 MAX_ANGLE = 2 * math.pi
+#: How far [rad] the boom's angle may lie beyond its stroke's ends (Eq. 12 at x = 0 and
+#: x = L of the recording's rig): sensor noise and an offset; far beyond, a wrong unit.
+ALPHA_MARGIN = 0.1
+#: Consecutive samples two recordings may share: a longer shared run (of quantised
+#: u, pressures and angles, held samples counted once) is the same measurement, so a
+#: holdout that shares one with a fit recording is fitted on, and two fit recordings
+#: that share one count the same data twice.  1 s at the 1 ms DAQ.
+OVERLAP_SAMPLES = 1000
+#: The quantisation of the overlap check, per unit: a copy written with fewer digits
+#: (``%.10g``) still matches; a recording of the same manoeuvre with its own noise does not.
+OVERLAP_STEP = {"V": 1e-4, "Pa (gauge)": 1.0, "rad": 1e-7}
 
 
 def recording_kind(source) -> str:
@@ -273,9 +289,21 @@ def parse_recording(path):
     return header, values, extra, sidecar
 
 
+def sidecar_path(path) -> Path:
+    """Where the sidecar of the recording at ``path`` is: its ``NAME.json``."""
+    return Path(path).with_suffix(".json")
+
+
+def recording_inputs(paths) -> list[tuple[Path, str]]:
+    """Recordings as a command's inputs, each with its sidecar
+    (``outputs.check_not_inputs``: no output may be either)."""
+    return [item for p in paths for item in ((Path(p), f"the input recording {p}"),
+                                             (sidecar_path(p), f"the sidecar of the input recording {p}"))]
+
+
 def _read_sidecar(path: Path) -> dict:
     """The sidecar of the recording at ``path`` (its ``NAME.json``), ``{}`` where it has none."""
-    side = path.with_suffix(".json")
+    side = sidecar_path(path)
     return read_sidecar(side) if side.is_file() else {}
 
 
@@ -306,7 +334,39 @@ def read_sidecar(side) -> dict:
             raise RecordingError(side, f"unknown rig value {k!r}; a sidecar may set {', '.join(RIG_KEYS)}")
         if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
             raise RecordingError(side, f"rig value {k!r} must be a finite number, not {v!r}")
+    check_rig_values(rig_over, side)
     return content
+
+
+def check_rig_values(rig: dict, side) -> None:
+    """Raise :class:`RecordingError` naming the sidecar ``side`` and its key where its
+    ``rig`` values (finite numbers of :data:`RIG_KEYS`), over the reference rig's, lie
+    outside the physics' own bounds: ``physics.check_valve``, ``check_gas``,
+    ``check_cylinder`` (and a stroke of at most ``L_MAX``), ``check_load``,
+    ``check_geometry`` and P_atm > 0."""
+    rec = Recording(Path(side), None, rig=dict(rig))
+    try:
+        require_positive("P_atm", rec.P_atm)
+        valve = rec.rig_tuple(Valve)
+        check_valve(valve)
+        if valve.A_max <= 0:                 # a closed valve (A_max = 0) is a model's, not a rig's that moved
+            raise ParameterError("A_max", valve.A_max, "must be > 0: at 0 the valve passes no air, and a "
+                                                       "recording is of a rig whose valve opens")
+        check_gas(rec.rig_tuple(Gas))
+        cylinder = rec.rig_tuple(Cylinder)
+        check_cylinder(cylinder)
+        if cylinder.L > L_MAX:
+            raise ParameterError("L", cylinder.L, f"must be at most {L_MAX:g} m (the model's scope)")
+        check_load(rec.rig_tuple(Load))
+        check_geometry(rec.rig_tuple(Geometry), cylinder.L)
+    except ParameterError as e:
+        key = "supply_pressure_gauge" if e.name == "P_s" and "supply_pressure_gauge" in rig else e.name
+        if key in rig:
+            raise RecordingError(side, f"rig value {key!r} = {rig[key]!r} is outside the physics' bounds: {e}") \
+                from None
+        given = ", ".join(f"{k} = {v!r}" for k, v in rig.items())
+        raise RecordingError(side, f"the rig values ({given}) leave the reference rig's {e.name} outside the "
+                                   f"physics' bounds: {e}") from None
 
 
 def read_checked(paths, kind: str | None = None, role: str = "recording") -> list[Recording]:
@@ -337,9 +397,11 @@ def check_same_rig(recs) -> None:
 
 
 def check_distinct(fits, hold: Recording) -> None:
-    """Raise ``ValueError`` where the holdout ``hold`` is one of the fit recordings (the
-    same file, or a copy of its samples): its error would be the fit's own, not a
-    holdout's."""
+    """Raise ``ValueError`` where the holdout ``hold`` is, or overlaps, a fit recording:
+    the same file, a copy of its samples, or a part of it (a run of more than
+    :data:`OVERLAP_SAMPLES` consecutive samples in common, :func:`shared_run`: the fit
+    file cut short, or with a sample changed).  Its error would be the fit's own, not
+    a holdout's."""
     for f in fits:
         if Path(f.path).resolve() == Path(hold.path).resolve():
             raise ValueError(f"holdout {hold.path} is also a fit recording: a holdout must be a recording "
@@ -347,6 +409,97 @@ def check_distinct(fits, hold: Recording) -> None:
         if f.data.shape == hold.data.shape and f.data.equals(hold.data):
             raise ValueError(f"holdout {hold.path} holds the same samples as the fit recording {f.path}: a "
                              f"holdout must be a recording that is not fitted on")
+        shared = shared_run(f, hold)
+        if shared:
+            raise ValueError(f"holdout {hold.path} shares {_describe_run(shared, f, hold)}: it is (a part of) "
+                             f"that recording, and a holdout must be a recording that is not fitted on")
+
+
+def check_no_duplicates(recs, role: str = "fit recording") -> None:
+    """Raise ``ValueError`` where two of the recordings ``recs`` are one measurement: the
+    same file given twice, a copy, or an overlap (a shared run of more than
+    :data:`OVERLAP_SAMPLES` samples, :func:`shared_run`).  Fitted twice, its samples
+    would count double and narrow the intervals without any new information."""
+    for i, a in enumerate(recs):
+        for b in recs[i + 1:]:
+            if Path(a.path).resolve() == Path(b.path).resolve():
+                raise ValueError(f"{a.path} is given twice as a {role}: each recording counts once")
+            if a.data.shape == b.data.shape and a.data.equals(b.data):
+                raise ValueError(f"{b.path} holds the same samples as {a.path}: the same recording given twice "
+                                 f"as a {role} would count its samples double (and narrow the intervals); "
+                                 f"give it once")
+            shared = shared_run(a, b)
+            if shared:
+                raise ValueError(f"{b.path} shares {_describe_run(shared, a, b)}: one measurement given twice "
+                                 f"as a {role} would count those samples double (and narrow the intervals); "
+                                 f"give each once")
+
+
+def _describe_run(shared, a: Recording, b: Recording) -> str:
+    rows, (a0, a1), (b0, b1) = shared
+    return (f"{rows} consecutive samples with {a.path} (its lines {b0} to {b1} are lines {a0} to {a1} of "
+            f"{a.path}; more than {OVERLAP_SAMPLES} in common are one measurement)")
+
+
+def _sample_keys(rec: Recording):
+    """Each sample's quantised commands, pressures and angles (:data:`OVERLAP_STEP`) as
+    one 64-bit hash, a sample equal to the one before dropped (a still or held stretch
+    counts once): ``(hashes, their row indices)``."""
+    spec = KINDS[rec.kind]
+    cols = [c for c in (*spec["commands"], *spec["pressures"], *spec["angles"]) if c in rec.data]
+    h = np.zeros(len(rec.data), dtype=np.uint64)
+    for k, c in enumerate(cols):
+        q = np.round(rec.data[c].to_numpy(float) / OVERLAP_STEP[UNITS[c]]).astype(np.int64).view(np.uint64)
+        h = _mix(h ^ _mix(q + np.uint64(k + 1)))
+    keep = np.ones(len(h), dtype=bool)
+    keep[1:] = h[1:] != h[:-1]
+    return h[keep], np.flatnonzero(keep)
+
+
+def _mix(x: np.ndarray) -> np.ndarray:
+    """splitmix64's finaliser, element-wise (uint64 arithmetic wraps)."""
+    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
+
+
+def _window_keys(h: np.ndarray, n: int) -> np.ndarray:
+    """A key of every run of ``n`` consecutive sample hashes: the sum of its ``n - 1``
+    pairs' hashes (each pair's order kept), by a wrapping cumulative sum."""
+    if len(h) < n:
+        return np.empty(0, dtype=np.uint64)
+    pairs = _mix(h[:-1] ^ ((h[1:] << np.uint64(17)) | (h[1:] >> np.uint64(47))))
+    c = np.concatenate([np.zeros(1, dtype=np.uint64), np.cumsum(pairs, dtype=np.uint64)])
+    return c[n - 1:] - c[:len(c) - n + 1]
+
+
+def shared_run(a: Recording, b: Recording, n: int = OVERLAP_SAMPLES):
+    """Where the recordings ``a`` and ``b`` share more than ``n`` consecutive samples (of
+    their quantised commands, pressures and angles, :func:`_sample_keys`; held samples
+    counted once): ``(rows of b, (first, last line in a), (first, last line in b))`` of
+    the first such run, else ``None``."""
+    ha, ia = _sample_keys(a)
+    hb, ib = _sample_keys(b)
+    ka, kb = _window_keys(ha, n + 1), _window_keys(hb, n + 1)
+    if not len(ka) or not len(kb):
+        return None
+    order = np.argsort(ka, kind="stable")
+    pos = np.searchsorted(ka[order], kb)
+    hit = (pos < len(ka)) & (ka[order][np.minimum(pos, len(ka) - 1)] == kb)
+    if not hit.any():
+        return None
+    j = int(np.argmax(hit))
+    i = int(order[pos[j]])
+    length = n + 1
+    while i + length < len(ha) and j + length < len(hb) and ha[i + length] == hb[j + length]:
+        length += 1
+
+    def lines(index, k, total):              # the run's first and last line (the header is line 1)
+        last = index[k + length] - 1 if k + length < len(index) else total - 1
+        return int(index[k]) + 2, int(last) + 2
+
+    (a0, a1), (b0, b1) = lines(ia, i, len(a.data)), lines(ib, j, len(b.data))
+    return b1 - b0 + 1, (a0, a1), (b0, b1)
 
 
 def max_bytes() -> int:
@@ -354,23 +507,41 @@ def max_bytes() -> int:
     env = os.environ.get("BOOMFMI_MAX_RECORDING_MB")
     if env:
         try:
-            return int(float(env) * 2**20)
+            mb = float(env)
         except ValueError:
             raise ValueError(f"$BOOMFMI_MAX_RECORDING_MB must be a number, not {env!r}") from None
+        if not (math.isfinite(mb) and mb > 0):
+            raise ValueError(f"$BOOMFMI_MAX_RECORDING_MB must be a finite number of MiB > 0, not {env!r} "
+                             f"(unset, the limit is {MAX_BYTES // 2**20} MiB)")
+        return max(1, int(mb * 2**20))
     return MAX_BYTES
 
 
-def check_plausible(rec: Recording) -> None:
+def read_experiment(path) -> Recording:
+    """Read a recording that drives a simulation (``simulate --experiment RUN.csv``, its
+    ``--replay``): :func:`read_recording` and the scale checks of :func:`check_plausible`
+    that an experiment's command and start need (time in seconds, pressures and angles
+    in their units), so that a time in milliseconds is named before a thousandfold run."""
+    rec = read_recording(path)
+    check_plausible(rec, measured=False)
+    return rec
+
+
+def check_plausible(rec: Recording, measured: bool = True) -> None:
     """Raise :class:`RecordingError` where a recording reads well but cannot be what the
-    format says: too few samples to judge anything, a time column that is not in
-    seconds at a DAQ's rate, pressures far out of scale with the rig's supply (bar or
-    kPa where Pa belong), samples held while the link was lost."""
+    format says: a time column that is not in seconds at a DAQ's rate, pressures far out
+    of scale with the rig's supply (bar or kPa where Pa belong), angles beyond their
+    physical range (degrees where radians belong: the boom's alpha beyond its stroke's
+    ends by Eq. 12 at the recording's rig, :data:`ALPHA_MARGIN`), and, for a recording
+    taken as measurements (``measured``: identification, diagnosis), too few samples
+    to judge anything, pressures that stay at nothing while the valve opens, samples
+    held while the link was lost.  ``measured=False``: an experiment's command."""
     d, path = rec.data, rec.path
     n = len(d)
-    if n < MIN_SAMPLES:
+    if measured and n < MIN_SAMPLES:
         raise RecordingError(path, f"{n} samples: identification and diagnosis need at least {MIN_SAMPLES} "
                                    f"(0.1 s at the 1 ms DAQ)")
-    dt = float(np.median(np.diff(d["t"].to_numpy(float))))
+    dt = float(np.median(np.diff(d["t"].to_numpy(float)))) if n > 1 else DT_RANGE[0]
     if not DT_RANGE[0] <= dt <= DT_RANGE[1]:
         unit = "milliseconds" if dt > DT_RANGE[1] else "microseconds"
         raise RecordingError(path, f"the samples are {dt:g} s apart (median): t must be in seconds at the DAQ's "
@@ -381,7 +552,7 @@ def check_plausible(rec: Recording) -> None:
     for u_col, (pa, pb) in zip(spec["commands"], zip(spec["pressures"][::2], spec["pressures"][1::2])):
         peak = max(float(np.max(np.abs(d[pa].to_numpy(float)))), float(np.max(np.abs(d[pb].to_numpy(float)))))
         opened = bool(np.any(np.abs(d[u_col].to_numpy(float) - reference_rig.u_centre) > 0.5))
-        if opened and peak < 0.02 * supply:
+        if measured and opened and peak < 0.02 * supply:
             raise RecordingError(path, f"the chamber pressures peak at {peak:g} Pa gauge while the valve opens, "
                                        f"{100 * peak / supply:.2g} % of the supply's {supply:g} Pa: are they in "
                                        f"bar or kPa? The format wants Pa (gauge)", column=pa)
@@ -397,7 +568,9 @@ def check_plausible(rec: Recording) -> None:
                 i = int(bad[0])
                 raise RecordingError(path, f"the joint angle {float(a[i])!r} is beyond +-2 pi: the format wants "
                                            f"radians; is it in degrees?", row=i + 2, column=c)
-    if "link_ok" in d:
+    if rec.kind == "boom":
+        _check_alpha(rec)
+    if measured and "link_ok" in d:
         held = np.flatnonzero(d["link_ok"].to_numpy(float) == 0)
         if held.size:
             raise RecordingError(path, f"{held.size} samples were held while the link was lost (link_ok = 0), "
@@ -405,11 +578,44 @@ def check_plausible(rec: Recording) -> None:
                                        f"cut them off or record again", row=int(held[0]) + 2, column="link_ok")
 
 
+def _check_alpha(rec: Recording) -> None:
+    """:class:`RecordingError` where the boom's angle lies beyond its stroke's ends (Eq. 12
+    at x = 0 and x = L of the recording's rig, widened by :data:`ALPHA_MARGIN`), naming
+    the likely unit: degrees where the values reach tens."""
+    geom, L = rec.rig_tuple(Geometry), rec.rig_tuple(Cylinder).L
+    lo, hi = sorted(float(alpha_from_x(x, geom)) for x in (0.0, L))
+    a = rec.data["alpha"].to_numpy(float)
+    bad = np.flatnonzero((a < lo - ALPHA_MARGIN) | (a > hi + ALPHA_MARGIN))
+    if not bad.size:
+        return
+    i = int(bad[0])
+    value = float(a[i])
+    if abs(value) > MAX_ANGLE or lo - ALPHA_MARGIN <= math.radians(value) <= hi + ALPHA_MARGIN:
+        hint = f"is it in degrees ({value:g} deg = {math.radians(value):.4g} rad)?"
+    else:
+        hint = "is it in another unit, or is the rig's geometry (a, b, l_min, L) not the sidecar's?"
+    raise RecordingError(rec.path, f"the boom angle {value!r} rad lies outside its physical range, "
+                                   f"{lo:.4g} to {hi:.4g} rad ({math.degrees(lo):.1f} to {math.degrees(hi):.1f} deg: "
+                                   f"the stroke's ends by Eq. 12 at the rig's geometry, +-{ALPHA_MARGIN:g} rad); the "
+                                   f"format wants radians; {hint}", row=i + 2, column="alpha")
+
+
 class RecordingWriter:
     """Write a recording row by row, crash-safe: each row is flushed to the OS as it is
-    written, so a process killed mid-run leaves a file whose every row is complete."""
+    written, so a process killed mid-run leaves a file whose every row is complete.
 
-    def __init__(self, path, columns=REQUIRED, sidecar: dict | None = None):
+    The file is locked while it is written (``outputs.OutputLock``: a second writer, by
+    the same name or through a link, is refused with ``outputs.OutputError``).  A new
+    recording is written in its place from the first row.  Where a file (or a link) is
+    at ``path`` already, the rows and the sidecar go to hidden ``.partial-PID`` files and
+    replace it only when the writer closes after a run that ended well
+    (:meth:`close`): a run that fails, is interrupted or is killed leaves the existing
+    recording and its sidecar as they were, and a link's target is never written.
+    ``inputs``: the command's input files, which the recording and its sidecar may not
+    be (``outputs.check_not_inputs``)."""
+
+    def __init__(self, path, columns=REQUIRED, sidecar: dict | None = None, inputs=()):
+        from .outputs import OutputLock, check_not_folder, check_not_inputs, clean_partials
         self.path = Path(path)
         self.columns = list(columns)
         kind = recording_kind(self.columns)
@@ -419,19 +625,53 @@ class RecordingWriter:
                                                                       "p_b and angle)" if kind == "excavator" else ""))
         if len(set(self.columns)) != len(self.columns):
             raise ValueError(f"a recording's columns must be distinct: {self.columns}")
+        side = sidecar_path(self.path)
+        check_not_inputs([self.path, side], inputs)
+        check_not_folder(self.path)
+        check_not_folder(side)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        if sidecar:
-            self.set_sidecar(sidecar)
-        self._f = open(self.path, "w", encoding="utf-8", newline="")
-        self._f.write(",".join(self.columns) + "\n")
-        self._f.flush()
+        self._lock = OutputLock(self.path)
+        self._f = None
+        #: the rows written so far; where a failed run's rows were kept (beside an
+        #: existing recording that stays as it was), their file
+        self.rows, self.kept = 0, None
+        #: where a failed run's rows would be kept
+        self.kept_path = self.path.with_name(f"{self.path.stem}.incomplete-{time.strftime('%Y%m%dT%H%M%S')}-"
+                                             f"{os.getpid()}{self.path.suffix}")
+        self._side_lock = None
+        try:
+            self._side_lock = OutputLock(side)          # the sidecar is this writer's too
+            for name in (self.path.name, side.name):
+                clean_partials(self.path.parent, name)
+            #: writing beside an existing file, to replace it when the run has ended well
+            self.replacing = os.path.lexists(self.path)
+            self._side_tmp = None
+            if self.replacing:
+                self._target = self.path.with_name(f".{self.path.name}.partial-{os.getpid()}")
+                fd = os.open(self._target, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o644)
+            else:
+                self._target = self.path
+                fd = os.open(self._target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+            self._f = open(fd, "w", encoding="utf-8", newline="")
+            self._lock.hold(fd)
+            if sidecar:
+                self.set_sidecar(sidecar)
+            self._f.write(",".join(self.columns) + "\n")
+            self._f.flush()
+        except BaseException:
+            self.close(ok=False)
+            raise
 
     def set_sidecar(self, sidecar: dict) -> None:
-        """Write the sidecar (atomically: a reader sees the old one or the new one)."""
-        side = self.path.with_suffix(".json")
+        """Write the sidecar (atomically: a reader sees the old one or the new one; where
+        an existing recording is being replaced, only when it is)."""
+        side = sidecar_path(self.path)
         tmp = side.with_name(f".{side.name}.partial-{os.getpid()}")
         tmp.write_text(json.dumps(sidecar, indent=2))
-        os.replace(tmp, side)
+        if self.replacing:
+            self._side_tmp = tmp
+        else:
+            os.replace(tmp, side)
 
     def write(self, row) -> None:
         """Append one sample: a mapping by column name or a sequence in column order."""
@@ -439,18 +679,57 @@ class RecordingWriter:
             row = [row[c] for c in self.columns]
         self._f.write(",".join(repr(float(v)) for v in row) + "\n")
         self._f.flush()
+        self.rows += 1
 
-    def close(self) -> None:
-        if not self._f.closed:
+    def close(self, ok: bool = True) -> None:
+        """Finish the file; where an existing recording is being replaced, replace it
+        (``ok``) or remove this run's rows and leave it as it was (not ``ok``)."""
+        if self._f is not None and not self._f.closed:
             self._f.flush()
             os.fsync(self._f.fileno())
             self._f.close()
+            if getattr(self, "replacing", False):
+                if ok:
+                    os.replace(self._target, self.path)
+                    if self._side_tmp is not None:
+                        os.replace(self._side_tmp, sidecar_path(self.path))
+                else:
+                    self._keep_failed_rows()
+        elif self._f is None and getattr(self, "replacing", False):
+            self._target.unlink(missing_ok=True)
+        self._lock.release()
+        if self._side_lock is not None:
+            self._side_lock.release()
+
+    def _keep_failed_rows(self) -> None:
+        """A run that did not end well beside an existing recording: its rows, where it
+        has any, go to a visible ``NAME.incomplete-STAMP.csv`` with a sidecar marked
+        ``incomplete`` (:attr:`kept`), so that nothing recorded is lost and nothing
+        replaces the existing recording; a run with no rows leaves nothing."""
+        side_tmp, self._side_tmp = self._side_tmp, None
+        rows = self.rows
+        if rows:
+            kept = self.kept_path
+            os.replace(self._target, kept)
+            sidecar = {}
+            if side_tmp is not None:
+                try:
+                    sidecar = json.loads(side_tmp.read_text())
+                except (OSError, ValueError):
+                    sidecar = {}
+            sidecar.setdefault("incomplete", "the run did not end well")
+            sidecar_path(kept).write_text(json.dumps(sidecar, indent=2))
+            self.kept = kept
+        else:
+            self._target.unlink(missing_ok=True)
+        if side_tmp is not None:
+            side_tmp.unlink(missing_ok=True)
 
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, exc_type, *exc):
+        self.close(ok=exc_type is None)
 
 
 def write_recording(path, data, sidecar: dict | None = None) -> Path:

@@ -23,7 +23,8 @@ from . import physics as ph
 from .compare import initial_state
 from .experiments import EXCAVATOR_PROFILES, PROFILES, excavator_profile, profile
 from .physics import reference_rig
-from .recording import read_recording
+from .physics.validation import require_positive
+from .recording import read_experiment
 from .system.master import CoSimulation
 from .system.ssv import Parameter
 
@@ -45,7 +46,7 @@ def rig_parameters(experiment: str, parameters: dict) -> dict:
     ``boom_load.a``...)."""
     if experiment in PROFILES:
         return {}
-    over = read_recording(experiment).rig_values()
+    over = read_experiment(experiment).rig_values()
     return {f"{comp}.{name}": value for name, value in over.items()
             for comp, names in parameters.items() if name in names}
 
@@ -54,7 +55,7 @@ def replay_parameters(recording) -> dict:
     """The teleoperation system's parameters for replaying ``recording`` through its
     hardware bridge: replay mode, the file, and the model starting where the machine
     starts (``boom_load.x0`` from the recording's first angle)."""
-    x0, _, _ = initial_state(read_recording(recording))
+    x0, _, _ = initial_state(read_experiment(recording))
     return {"hardware_bridge.mode": "replay", "hardware_bridge.recording": str(recording),
             "boom_load.x0": x0}
 
@@ -69,7 +70,7 @@ def experiment_inputs(experiment: str, input_names: list[str]):
     if path.suffix.lower() != ".csv" and not path.exists():
         raise ValueError(f"unknown experiment {experiment!r}: give one of {', '.join(PROFILES)} "
                          f"or a recording (.csv)")
-    rec = read_recording(path)
+    rec = read_experiment(path)
     table = pd.DataFrame({"t": rec.data["t"], **{n: rec.data["u"] for n in input_names}})
     return table, float(rec.data["t"].iloc[-1])
 
@@ -131,6 +132,15 @@ def max_stable_step(cosim) -> float:
     cyl = ph.Cylinder(**{k: bound_value(cosim, k) for k in ph.Cylinder._fields})
     gas = ph.Gas(k=bound_value(cosim, "k"))
     P_s, M = bound_value(cosim, "P_s"), bound_value(cosim, "M")
+    try:           # the FMUs check their values when initialised, after this divides by them
+        ph.check_cylinder(cyl)
+        ph.check_gas(gas)
+        require_positive("P_s", P_s)
+        require_positive("M", M)
+    except ph.ParameterError as e:
+        names = [n for n in cosim.structure.parameters if n.rpartition(".")[2] == e.name]
+        where = f"{cosim.structure.parameter_origin.get(names[0], 'parameter set')}: {names[0]}" if names else e.name
+        raise ValueError(f"{where}: {e}") from None
     stiffness = max(ph.pneumatic_stiffness(P_s, P_s, x, cyl, gas) for x in (0.0, cyl.L))
     return STABLE_SHARE / math.sqrt(stiffness / M)
 
@@ -222,7 +232,7 @@ def excavator_inputs(experiment: str, valves: dict[str, str]):
     if experiment in PROFILES:
         raise ValueError(f"{experiment!r} is a boom experiment; the whole excavator takes one of "
                          f"{', '.join(EXCAVATOR_PROFILES)} or an excavator recording")
-    rec = read_recording(experiment)
+    rec = read_experiment(experiment)
     if rec.kind != "excavator":
         raise ValueError(f"{experiment}: a boom recording; the whole excavator replays an excavator recording "
                          f"(u_swing, u_boom, u_arm, u_bucket)")

@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..foreign import increasing_time, read_with
+from ..foreign import check_time_scale, increasing_time, read_with
 from ..physics import friction_laws as fl
 from ..physics.effects import stribeck_level, stribeck_weight
 from ..physics import reference_rig
@@ -76,6 +76,13 @@ N_BOOT = 200
 #: Fewest samples a run needs (a few strokes at 100 Hz).
 MIN_SAMPLES = 200
 _LOWER = {"A_eff": 0.0, "F_d": 0.0, "F_d0": 0.0, "F_s_pos": 0.0, "F_s_neg": 0.0, "K_v": 0.0}
+#: A friction test's plausible ranges: the DAQ's sample spacing [s] (``foreign.check_time_scale``), the rod's largest
+#: speed [m/s] (a cylinder moves at most a few m/s), its travel [m] (more than a
+#: breakaway window's, at most a long stroke).  Beyond them, the map's unit (or
+#: column) of t or x is wrong, and :func:`check_plausible_run` names the entry.
+DT_RANGE = (1e-6, 1.0)
+MAX_SPEED = 5.0
+TRAVEL_RANGE = (2.0 * BREAKAWAY_TRAVEL, 5.0)
 
 
 @dataclass
@@ -118,13 +125,57 @@ def load_run(path, opts: dict, smooth: float = SMOOTH, P_atm: float = reference_
     if len(t) < MIN_SAMPLES:
         raise RecordingError(table.path, f"{len(t)} samples: a friction test needs at least {MIN_SAMPLES}")
     x, F, p = table.columns["x"], table.columns["F"], table.gauge()
+    check_time_scale(table, t, "friction test", DT_RANGE)
     v, v_rest = velocity(t, x, smooth)
+    check_plausible_run(table, t, x, v)
     rest = np.abs(v) < v_rest
     if np.count_nonzero(v > v_rest) < 10 or np.count_nonzero(v < -v_rest) < 10:
         raise RecordingError(table.path, "the rod does not move both ways: a friction test needs strokes in "
                                          "both directions")
     digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
     return Run(Path(path), t, x, v, p, F, rest, stroke_ids(v, rest), v_rest, table.lines, smooth, digest=digest)
+
+
+def check_plausible_run(table, t: np.ndarray, x: np.ndarray, v: np.ndarray) -> None:
+    """RecordingError where the rod's motion cannot be a cylinder's: faster than
+    :data:`MAX_SPEED` or a travel outside :data:`TRAVEL_RANGE` (x in m where the file
+    has mm, or x and p swapped: a pressure taken for a position barely moves),
+    naming the map entry of x and the option that fixes it."""
+    label = next((e.label for e in table.entries if e.name == "x"), None)
+    speed, travel = float(np.max(np.abs(v))), float(np.ptp(x))
+    if speed > MAX_SPEED or travel > TRAVEL_RANGE[1]:
+        raise RecordingError(table.path, f"the rod travels {travel:.3g} m at up to {speed:.3g} m/s: a cylinder's rod "
+                                         f"moves at most a few m/s ({MAX_SPEED:g}) over a stroke of at most "
+                                         f"{TRAVEL_RANGE[1]:g} m; is x in mm where the map says otherwise? Give its "
+                                         f"unit in --map (map entry {table.entry_text('x')}, e.g. x=COLUMN:mm)",
+                             column=label)
+    if travel < TRAVEL_RANGE[0]:
+        raise RecordingError(table.path, f"the rod travels {1e3 * travel:.3g} mm in all: a friction test strokes it "
+                                         f"over more than {1e3 * TRAVEL_RANGE[0]:g} mm; does the map's x (map entry "
+                                         f"{table.entry_text('x')}) name the position's column, not the pressure's "
+                                         f"(x and p swapped?), and in its unit? Fix it in --map", column=label)
+
+
+def check_friction_signs(fits: dict, runs: list) -> None:
+    """ValueError where a fitted law gives a negative friction level (a Coulomb or
+    static level below zero anywhere over the FIT files' pressures): no seal pushes
+    the rod the way it moves, so the file's columns or units are not what the map says."""
+    p = np.concatenate([r.p for r in runs])
+    lo, hi = float(np.min(p)), float(np.max(p))
+    bad = []
+    for law, fit in fits.items():
+        P = fit.params
+        if law == "pressure":
+            for name, c in (("F_d0", "c_d"), ("F_s0_pos", "c_s_pos"), ("F_s0_neg", "c_s_neg")):
+                low = min(P[name] + P[c] * lo, P[name] + P[c] * hi)
+                if low < 0:
+                    bad.append(f"{law}: {name} + {c} p = {low:.3g} N at p = {(lo if P[c] > 0 else hi) / 1e5:.3g} bar")
+        else:
+            bad += [f"{law}: {k} = {P[k]:.3g} N" for k in ("F_d", "F_s_pos", "F_s_neg") if k in P and P[k] < 0]
+    if bad:
+        raise ValueError(f"negative friction ({'; '.join(bad)}): a friction cannot be negative (a seal never "
+                         f"pushes the rod the way it moves); check the --map: the columns of x, p and F and "
+                         f"their units (x in mm, p in bar, F in N), the pressure's reference (p_gauge or p_abs) and the force's sign (a load cell that reads a push as negative)")
 
 
 def split_strokes(run: Run) -> tuple[Run, Run]:
@@ -554,6 +605,7 @@ def bench_friction(fit_paths, hold_paths, area: float, opts: dict, split: bool =
     for law in laws:
         say(f"fitting {law}")
         fit = fit_law(law, fit_d, A_fixed=A_fixed)
+        check_friction_signs({law: fit}, fit_runs)
         fits[law] = fit
         say(f"bootstrap of {law} ({n_boot} replicates)")
         intervals = bootstrap(fit, fit_d, A_fixed, n_boot)

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..foreign import increasing_time, read_with, units
+from ..foreign import check_time_scale, increasing_time, read_with, units
 from ..physics import leak_laws as ll
 from ..physics import reference_rig
 from ..physics.params import Gas
@@ -53,6 +53,10 @@ CLOSING_SMOOTH = 0.5
 #: Fewest samples after the chamber was closed.
 MIN_SAMPLES = 30
 UNITS = {"p0": "Pa", "C": "kg/(s Pa)", "A": "m^2", "dT0": "K", "tau": "s"}
+#: A leak-down run's plausible sample spacing and length [s] (a DAQ's rate; a second to
+#: a week): beyond them the map's unit of t is not the file's (``foreign.check_time_scale``).
+SPACING = (1e-6, 60.0)
+DURATION = (1.0, 7 * 86400.0)
 
 
 @dataclass
@@ -82,6 +86,7 @@ def load_leak_run(path, opts: dict, P_atm: float = reference_rig.P_atm, p_start:
     closing."""
     table = read_with(path, opts, P_atm)
     t = increasing_time(table)
+    check_time_scale(table, t, "leak-down run", SPACING, DURATION)
     if table.has("p_gauge") or table.has("p_abs"):
         if p_start is not None:
             raise ValueError("--p-start is for a map with dp (a pressure change); this map gives the pressure itself")

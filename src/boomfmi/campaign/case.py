@@ -39,8 +39,10 @@ def case_spec(case, ssp=None) -> dict:
     names: set[str] = set()
     for e in sorted(case.entries, key=lambda e: (e.role, e.line)):
         name = e.recording.name if e.recording.suffix == ".csv" else e.recording.name + ".csv"
-        if name in names:                      # two recordings of one name, from two folders
-            name = f"{len(names)}_{name}"
+        base, k = name, 0
+        while name in names:                   # two recordings of one name, from two folders
+            k += 1                             # (and a third may be called 1_NAME already)
+            name = f"{k}_{base}"
         names.add(name)
         csv_bytes = e.recording.read_bytes()
         own = e.recording.with_suffix(".json")
@@ -58,12 +60,29 @@ def case_spec(case, ssp=None) -> dict:
             "ssp": str(ssp) if ssp else None, "fingerprint": digest.hexdigest()}
 
 
+#: the Dask event topic on which a case tells where each of its attempts starts: ``{"key":
+#: its task's key, "worker": the worker's address}`` (the engine's record of attempts)
+CASE_STARTED = "boomfmi-case-started"
+
+
 def _worker_name() -> str:
     try:
         from distributed import get_worker
         return get_worker().address
     except (ImportError, ValueError):
         return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def _announce(worker: str) -> None:
+    """Within a Dask worker's task: tell the client, through the scheduler, that this
+    attempt of the case starts on ``worker`` (:data:`CASE_STARTED`).  Outside a Dask
+    worker's task (a plain loop over cases), nothing: the case runs all the same."""
+    try:
+        from distributed import get_worker
+        w = get_worker()
+        w.log_event(CASE_STARTED, {"key": str(w.get_current_task()), "worker": worker})
+    except (ImportError, ValueError, KeyError):    # no Dask, no worker, no task: nothing to tell
+        return
 
 
 def run_case(spec: dict) -> dict:
@@ -74,6 +93,7 @@ def run_case(spec: dict) -> dict:
     log: list[str] = []
     result = {"status": "failed", "outputs": {}, "summary": None, "error": None, "traceback": None,
               "log": log, "worker": _worker_name(), "fingerprint": spec["fingerprint"]}
+    _announce(result["worker"])
     with tempfile.TemporaryDirectory(prefix="boomfmi-case-") as tmp:
         tmp = Path(tmp)
         sources: dict[str, str] = {}

@@ -20,9 +20,16 @@
   started again on another worker, up to ``distributed.scheduler.allowed-failures``
   times (default 3), after which it is reported failed (``KilledWorker``).  Results
   reach the client once per case, and only the client writes: a case is never
-  written twice, nor half.
-* **Progress.**  ``progress`` is told of every case as it completes
-  (:class:`Progress`); the CLI draws a bar from it.
+  written twice, nor half.  The scheduler sees a killed worker go at once, whatever
+  its kind (with or without a nanny), because a case starts no process of its own
+  there (``diagnose.attribute.may_start_processes``: a forked child would hold the dead
+  worker's connections open until ``worker-ttl``).  Each case's attempts (the worker
+  of each, when it started and ended, and why it was run again: the scheduler's
+  reason for removing the worker) are recorded from Dask's events (:class:`Attempts`)
+  in its ``case.json``, ``campaign.json`` and ``campaign.html``.
+* **Progress.**  ``progress`` is told of every case as it completes, and of each
+  worker lost with a case ("worker lost, case ... rescheduled") (:class:`Progress`);
+  the CLI draws a bar from it.
 """
 from __future__ import annotations
 
@@ -30,6 +37,7 @@ import json
 import logging
 import os
 import sys
+import threading
 import time
 from collections import deque
 from datetime import datetime, timezone
@@ -37,7 +45,7 @@ from pathlib import Path
 
 from .._json import dumps
 from ..outputs import OutputSet
-from .case import CASE_VERSION, case_spec, run_case
+from .case import CASE_STARTED, CASE_VERSION, case_spec, run_case
 from .manifest import Manifest, read_manifest, slug
 
 #: seconds to wait for a scheduler's first worker
@@ -59,9 +67,12 @@ class Progress:
 
     def __init__(self, total: int, skipped: int, write=None, tty: bool | None = None):
         self.total, self.skipped, self.done, self.failed = total, skipped, 0, 0
+        self.lost: set[str] = set()          # workers lost with a case of this campaign
+        self.rescheduled = 0                 # cases sent back to the scheduler by a lost worker
         self.t0 = time.perf_counter()
         self.write = write
         self.tty = sys.stderr.isatty() if tty is None else tty
+        self._lock = threading.Lock()        # lines come from the client's event loop too
 
     def bar(self) -> str:
         n = self.skipped + self.done + self.failed
@@ -72,15 +83,29 @@ class Progress:
         left = self.total - n
         eta = f", about {_duration(elapsed / ran * left)} left" if ran and left else ""
         extra = ", ".join(s for s in (f"{self.skipped} done before" if self.skipped else "",
-                                      f"{self.failed} failed" if self.failed else "") if s)
+                                      f"{self.failed} failed" if self.failed else "",
+                                      f"{len(self.lost)} worker(s) lost" if self.lost else "",
+                                      f"{self.rescheduled} case(s) rescheduled" if self.rescheduled else "") if s)
         return (f"[{'#' * fill}{'.' * (width - fill)}] {n}/{self.total} cases"
                 + (f" ({extra})" if extra else "") + f", {_duration(elapsed)}{eta}")
 
     def case(self, line: str, failed: bool) -> None:
-        if failed:
-            self.failed += 1
-        else:
-            self.done += 1
+        with self._lock:
+            if failed:
+                self.failed += 1
+            else:
+                self.done += 1
+            self._line(line)
+
+    def worker_lost(self, line: str, worker: str, rescheduled: bool) -> None:
+        """A worker was lost holding a case (:class:`Attempts`): ``line`` says which, and
+        whether it was rescheduled."""
+        with self._lock:
+            self.lost.add(worker)
+            self.rescheduled += bool(rescheduled)
+            self._line(line)
+
+    def _line(self, line: str) -> None:
         if self.write:
             if self.tty:
                 self.write("\r\033[K" + line + "\n" + self.bar())
@@ -99,6 +124,108 @@ class Progress:
 def _duration(s: float) -> str:
     s = int(round(s))
     return f"{s // 3600}h{s % 3600 // 60:02d}m" if s >= 3600 else f"{s // 60}m{s % 60:02d}s" if s >= 60 else f"{s}s"
+
+
+def _iso(t: float) -> str:
+    return datetime.fromtimestamp(t, timezone.utc).isoformat(timespec="milliseconds")
+
+
+def removal_reason(msg: dict) -> str:
+    """Why the scheduler removed a worker, from its "remove-worker" event."""
+    stimulus = str(msg.get("stimulus_id") or "")
+    if msg.get("expected"):
+        return "the worker left in an orderly way (retired or closed)"
+    if stimulus.startswith("handle-worker-cleanup"):
+        return ("its connection to the scheduler closed: the worker process died or was killed, "
+                "or its machine went away")
+    if stimulus.startswith("check-worker-ttl"):
+        return "it sent no heartbeat within distributed.scheduler.worker-ttl"
+    return f"the scheduler removed it ({stimulus or 'no reason given'})"
+
+
+class Attempts:
+    """Each case's attempts in this run, from Dask's events: each attempt's task says
+    where it starts (:data:`~.case.CASE_STARTED`, from its worker), and the scheduler
+    says which worker it removed, why, and which of the cases it held ("remove-worker"
+    on its topic "all": those it ran or had queued, and results the client had not yet
+    fetched).  Each such case is started again elsewhere, up to
+    ``distributed.scheduler.allowed-failures`` times (as this client's configuration
+    gives it).  The handlers run on the client's event loop; ``note(line, worker,
+    rescheduled)`` is told of each case a lost worker sends back
+    (:meth:`Progress.worker_lost`)."""
+
+    def __init__(self, note=None):
+        import dask
+        import distributed  # noqa: F401  (its configuration's defaults)
+        self.note = note
+        self.allowed = int(dask.config.get("distributed.scheduler.allowed-failures"))
+        self._lock = threading.Lock()
+        self._labels: dict[str, str] = {}            # task key -> its case's label
+        self._tries: dict[str, list[dict]] = {}
+        self._failures: dict[str, int] = {}          # the scheduler's count (not for a retired worker)
+
+    def expect(self, key: str, label: str) -> None:
+        with self._lock:
+            self._labels[key] = label
+
+    def started(self, event) -> None:
+        _, msg = event
+        if not isinstance(msg, dict):
+            return
+        with self._lock:
+            if msg.get("key") in self._labels:
+                self._tries.setdefault(msg["key"], []).append(
+                    {"worker": msg.get("worker"), "started": _iso(event[0]), "ended": None,
+                     "outcome": "running", "lost": False, "reason": None})
+
+    def removed(self, event) -> None:
+        t, msg = event
+        if not isinstance(msg, dict) or msg.get("action") != "remove-worker":
+            return
+        worker, reason = msg.get("worker"), removal_reason(msg)
+        lines = []
+        with self._lock:
+            for kind, keys in (("ran", msg.get("processing-tasks")), ("result", msg.get("lost-computed-tasks"))):
+                for key in sorted(str(k) for k in keys or ()):
+                    if key not in self._labels:
+                        continue
+                    tries = self._tries.setdefault(key, [])
+                    mine = next((a for a in reversed(tries) if a["worker"] == worker and a["outcome"] == "running"), None)
+                    if mine is None:        # queued there: not started, as far as the scheduler heard
+                        mine = {"worker": worker, "started": None}
+                        tries.append(mine)
+                    mine.update(ended=_iso(t), lost=True, reason=reason, outcome=(
+                        "its result lost with the worker before the client fetched it" if kind == "result" else
+                        "worker lost mid-case" if mine["started"] else "worker lost before the case started there"))
+                    failures = self._failures[key] = self._failures.get(key, 0) + (not msg.get("expected"))
+                    again = failures <= self.allowed
+                    what = ("rescheduled" if again else
+                            f"not rescheduled: lost with {failures} workers (distributed.scheduler.allowed-failures "
+                            f"{self.allowed})")
+                    lines.append((f"worker lost, case {self._labels[key]} {what}: {worker} ({reason}; "
+                                  f"attempt {len(tries)}: {mine['outcome']})", again))
+        for line, again in lines:
+            if self.note:
+                self.note(line, worker, again)
+
+    def finish(self, key: str, result: dict | None) -> list[dict]:
+        """The case's attempts, numbered, ``result`` (its worker's, None where the
+        scheduler gave up on it) the last."""
+        with self._lock:
+            tries = self._tries.pop(key, [])
+            self._labels.pop(key, None)
+            self._failures.pop(key, None)
+        if result is not None:
+            last = next((a for a in reversed(tries) if a["outcome"] == "running"
+                         and a["worker"] == result.get("worker")), None)
+            if last is None:              # not told (no Dask worker, or its event not through)
+                last = {"worker": result.get("worker"), "started": None, "lost": False, "reason": None}
+                tries.append(last)
+            last.update(outcome=result["status"], ended=_iso(time.time()))
+        for a in tries:
+            if a["outcome"] == "running":       # started, then no word of it: another attempt won
+                a["outcome"] = "no result (the scheduler ran the case again elsewhere)"
+        return [{"attempt": i + 1, **a} for i, a in enumerate(tries)]
 
 
 def case_folder(out: Path, case) -> Path:
@@ -124,6 +251,7 @@ def write_case(folder: Path, case, result: dict) -> dict:
               "fingerprint": result.get("fingerprint"), "case_version": CASE_VERSION,
               "recordings": {role: [str(e.recording) for e in case.role(role)] for role in ("fit", "holdout")},
               "worker": result.get("worker"), "wall_s": result.get("wall_s"),
+              "attempts": result.get("attempts") or [],
               "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
               "error": result.get("error"), "summary": result.get("summary"),
               "files": sorted(result.get("outputs", {})), "log": result.get("log", []),
@@ -212,6 +340,10 @@ def run_cases(manifest: Manifest, out, engine: Engine, ssp=None, progress=None) 
     bar.start()
     running: dict = {}
     pending = as_completed()
+    tries = Attempts(note=bar.worker_lost)
+    client = engine.client
+    client.subscribe_topic("all", tries.removed)              # the scheduler's: a worker removed
+    client.subscribe_topic(CASE_STARTED, tries.started)       # each case's: an attempt starts
 
     def submit():
         while todo and len(running) < 2 * engine.slots() + 1:
@@ -219,6 +351,7 @@ def run_cases(manifest: Manifest, out, engine: Engine, ssp=None, progress=None) 
             key = f"boomfmi-case-{slug(case.machine)}-{slug(case.date)}-{spec['fingerprint'][:12]}"
             fut = engine.client.submit(run_case, spec, key=key, pure=False)
             running[fut.key] = (case, spec["fingerprint"])
+            tries.expect(fut.key, case.label)
             pending.add(fut)
     try:
         submit()
@@ -231,6 +364,9 @@ def run_cases(manifest: Manifest, out, engine: Engine, ssp=None, progress=None) 
                 hint = (" (the case's worker died each time it ran it: distributed.scheduler.allowed-failures)"
                         if name == "KilledWorker" else "")
                 result = _failure(fp, f"{name}: {e}{hint}")
+                result["attempts"] = tries.finish(fut.key, None)
+            else:
+                result["attempts"] = tries.finish(fut.key, result)
             fut.release()
             rec = write_case(case_folder(out, case), case, result)
             records[case.key] = rec
@@ -238,13 +374,18 @@ def run_cases(manifest: Manifest, out, engine: Engine, ssp=None, progress=None) 
             what = (f"FAILED: {rec['error']}" if failed else
                     f"verdict {rec['summary'].get('verdict')}" if rec["summary"].get("judgeable") else
                     f"not judgeable: {rec['summary'].get('reason')}")
-            bar.case(f"{case.label}: {what} ({rec['wall_s'] or 0:.0f} s on {rec['worker'] or '-'})", failed)
+            before = "".join(f"; attempt {a['attempt']} on {a['worker']}: {a['outcome']}"
+                             for a in rec["attempts"] if a["lost"])
+            bar.case(f"{case.label}: {what} ({rec['wall_s'] or 0:.0f} s on {rec['worker'] or '-'}{before})", failed)
             submit()
     except BaseException:
         for f in list(pending.futures):
             f.cancel()
         raise
     finally:
+        for topic in ("all", CASE_STARTED):
+            if client.status == "running":
+                client.unsubscribe_topic(topic)
         bar.finish()
     return [records[c.key] for c in manifest.cases]
 
@@ -269,4 +410,7 @@ def run_campaign(manifest, out, scheduler: str | None = None, workers: int | Non
            "address": address, "worker_threads": slots, "cases": len(records),
            "ran": sum(not r.get("resumed") for r in records), "resumed": sum(bool(r.get("resumed")) for r in records),
            "failed": sum(r["status"] != "done" for r in records), "wall_s": round(time.perf_counter() - t0, 2)}
+    lost = [a for r in records if not r.get("resumed") for a in r.get("attempts") or [] if a["lost"]]
+    run["workers_lost"] = {a["worker"]: a["reason"] for a in lost}       # this run's, each with why
+    run["cases_retried"] = sum(any(a["lost"] for a in r.get("attempts") or []) for r in records if not r.get("resumed"))
     return write_campaign(out, manifest, records, run)

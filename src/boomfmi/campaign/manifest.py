@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 from datetime import date, datetime
 from pathlib import Path
 
+from ..names import MAX_NAME
 from ..recording import KINDS, RecordingError, read_header, read_sidecar, recording_kind
 
 REQUIRED = ("machine", "date", "role", "recording")
@@ -104,10 +105,11 @@ class Manifest:
 def slug(text: str) -> str:
     """A folder name for ``text``: letters, digits, ``.``, ``_`` and ``-`` kept, anything
     else ``_``; where that changed the text, a short hash of it is appended so that two
-    names never share a folder."""
+    names never share a folder.  A text longer than :data:`~boomfmi.names.MAX_NAME` is
+    cut to it (with the hash): a file system takes no longer name."""
     clean = re.sub(r"[^A-Za-z0-9._-]", "_", text).strip(".") or "_"
-    if clean != text:
-        clean += "-" + hashlib.sha1(text.encode()).hexdigest()[:6]
+    if clean != text or len(clean) > MAX_NAME:
+        clean = clean[:MAX_NAME - 7] + "-" + hashlib.sha1(text.encode()).hexdigest()[:6]
     return clean
 
 

@@ -1,8 +1,9 @@
 """A campaign's outputs: ``campaign.json``, ``campaign.html`` and the trend plots.
 
-``campaign.json`` holds ``run`` (the engine, counts, wall time), ``cases`` (each case:
-machine, date, status, its folder, verdict or error, the identified parameters with
-their intervals, each effect's size) and ``machines`` (each machine's last verdict,
+``campaign.json`` holds ``run`` (the engine, counts, wall time, the workers lost with
+a case and why), ``cases`` (each case: machine, date, status, its folder, verdict or
+error, the identified parameters with their intervals, each effect's size, its
+attempts: each one's worker, outcome and why the case ran again) and ``machines`` (each machine's last verdict,
 trends and flags: :func:`~.trend.machine_trends`).  ``campaign.html`` is readable on
 its own: the fleet table first (machine, last date and verdict, flags), then each
 flag, each machine's trend plot (``trend_<machine>.png``) and every case with a link
@@ -27,6 +28,7 @@ def write_campaign(out: Path, manifest, records: list[dict], run: dict) -> dict:
         row = {"machine": case.machine, "date": case.date, "status": rec["status"],
                "folder": (Path("cases") / case.folder).as_posix(), "resumed": bool(rec.get("resumed")),
                "worker": rec.get("worker"), "wall_s": rec.get("wall_s"), "error": rec.get("error"),
+               "attempts": rec.get("attempts") or [],
                "recordings": rec.get("recordings"),
                "judgeable": s.get("judgeable"), "verdict": s.get("verdict"), "reason": s.get("reason"),
                "params": s.get("params"), "nrmse_holdout": s.get("nrmse_holdout"),
@@ -115,6 +117,20 @@ def _verdict(v) -> str:
     return "none (no gap)" if v == [] else " + ".join(v)
 
 
+def _attempts_html(c: dict) -> str:
+    """The worker a case ran on and, where it ran more than once, each attempt: its
+    worker, its outcome and why the case was run again."""
+    e = html.escape
+    tries = c.get("attempts") or []
+    if len(tries) <= 1:
+        return e(c.get("worker") or "-")
+    return (f"{e(c.get('worker') or '-')}<br><b>{len(tries)} attempts</b>:<ol>"
+            + "".join(f"<li>on {e(a['worker'] or '-')}"
+                      + (f" from {e(a['started'])}" if a.get("started") else "")
+                      + f": {e(a['outcome'])}" + (f" ({e(a['reason'])})" if a.get("reason") else "") + "</li>"
+                      for a in tries) + "</ol>")
+
+
 def _html(doc: dict) -> str:
     e = html.escape
     run = doc["run"]
@@ -149,12 +165,19 @@ def _html(doc: dict) -> str:
         wall = "" if c["wall_s"] is None else f"{c['wall_s']:.0f} s"
         case_rows.append(f"<tr><td>{e(c['machine'])}</td><td>{e(c['date'])}</td><td>{what}</td><td>{e(params)}</td>"
                          f"<td>{wall}"
-                         f"{' (earlier run)' if c['resumed'] else ''}</td><td>{link}</td></tr>")
+                         f"{' (earlier run)' if c['resumed'] else ''}</td><td>{_attempts_html(c)}</td>"
+                         f"<td>{link}</td></tr>")
+    lost = run.get("workers_lost") or {}
+    lost_html = ("" if not lost else
+                 f"<p style=\"font-size:1.2em\"><b>{len(lost)} worker(s) lost</b> while running cases; "
+                 f"{run.get('cases_retried', 0)} case(s) run again elsewhere (see their attempts below):</p><ul>"
+                 + "".join(f"<li>{e(w)}: {e(r)}</li>" for w, r in lost.items()) + "</ul>")
     return f"""<!doctype html><html><head><meta charset="utf-8"><title>boomfmi campaign</title>
 <style>body{{font-family:sans-serif;max-width:1100px;margin:2em auto}}table{{border-collapse:collapse}}
 td,th{{border:1px solid #ccc;padding:4px 8px;font-size:13px;vertical-align:top}}</style></head><body>
 <h1>Campaign: {len(doc['machines'])} machine(s), {run['cases']} case(s)</h1>
 <p style="font-size:1.2em">{flagged} machine(s) flagged; {run['failed']} case(s) failed.</p>
+{lost_html}
 <h2>Fleet</h2>
 <table><tr><th>machine</th><th>cases</th><th>last date</th><th>last verdict</th><th>trend flags</th></tr>
 {''.join(rows)}</table>
@@ -166,6 +189,6 @@ run on {e(run['scheduler'])} ({e(str(run['address']))}, {run['worker_threads']} 
 {run['wall_s']:.0f} s: {run['ran']} case(s) run, {run['resumed']} done before.</p>
 <h2>Machines</h2>{''.join(sections)}
 <h2>Cases</h2>
-<table><tr><th>machine</th><th>date</th><th>verdict</th><th>baseline</th><th>time</th><th></th></tr>
+<table><tr><th>machine</th><th>date</th><th>verdict</th><th>baseline</th><th>time</th><th>worker (attempts)</th><th></th></tr>
 {''.join(case_rows)}</table>
 </body></html>"""

@@ -58,7 +58,9 @@ from __future__ import annotations
 
 import itertools
 import math
+import multiprocessing
 import os
+import sys
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
@@ -357,11 +359,32 @@ def _cost(job) -> int:
     return sum(max(len(f) for f in FORMS.get(n, [CANDIDATES[n]])) ** 3 * len(FORMS.get(n, [None])) for n in names)
 
 
+def may_start_processes() -> bool:
+    """Whether this process may start worker processes of its own (a process pool): not
+    in a daemonic process (which may have none: a Dask nanny's worker), nor in a Dask
+    worker's task of any kind.  A process forked by a Dask worker inherits its
+    connections: the worker killed, the orphan keeps them open (and outlives it), so the
+    scheduler does not see the worker go and its cases wait for the scheduler's
+    ``worker-ttl`` (minutes) before they run again elsewhere.  There, the work runs in
+    the worker's own thread, and a lost worker's cases are rescheduled at once."""
+    if multiprocessing.current_process().daemon:
+        return False
+    if "distributed" not in sys.modules:     # no Dask in this process: no Dask worker either
+        return True
+    from distributed import get_worker
+    try:
+        get_worker()
+    except ValueError:                       # "No worker found": not in a worker's task
+        return True
+    return False
+
+
 def _map(fn, jobs, workers, cost=None):
     """``fn`` over ``jobs`` in ``workers`` processes, the costliest by ``cost(job)``
     (default: a candidate fit's, :func:`_cost`) started first (so that the
-    two-parameter fit does not start last); results in the jobs' order."""
-    if workers > 1 and len(jobs) > 1:
+    two-parameter fit does not start last); results in the jobs' order.  One after
+    the other in this process where it may start none (:func:`may_start_processes`)."""
+    if workers > 1 and len(jobs) > 1 and may_start_processes():
         order = sorted(range(len(jobs)), key=lambda i: -(cost or _cost)(jobs[i]))
         with ProcessPoolExecutor(min(workers, len(jobs))) as pool:
             done = dict(zip(order, pool.map(fn, [jobs[i] for i in order])))

@@ -48,7 +48,7 @@ from ..identify.excavator_outputs import (bound_machine, cannot_tell, excavator_
 from ..physics import reference_rig
 from ..physics.excavator import JOINTS
 from ..outputs import OutputSet
-from ..recording import check_distinct, check_same_rig, read_checked
+from ..recording import check_distinct, check_no_duplicates, check_same_rig, read_checked
 from .attribute import ABS_FLOOR, MIN_SHRINK, NOISE_FACTOR
 from .excavator import _span, diagnose_excavator, joint_cut, joint_pressures
 from .localise import _windows
@@ -69,6 +69,8 @@ def diagnose_excavator_recordings(fit_paths, hold_paths, out_dir, progress=None)
         raise ValueError("diagnose needs at least one holdout recording (--holdout): the joints are judged there")
     fit_recs = read_checked(fit_paths, "excavator", "fit recording")
     hold_recs = read_checked(hold_paths, "excavator", "holdout")
+    check_no_duplicates(fit_recs)
+    check_no_duplicates(hold_recs, "holdout")
     for h in hold_recs:
         check_distinct(fit_recs, h)
     check_same_rig([*fit_recs, *hold_recs])

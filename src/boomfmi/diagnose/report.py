@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import html
 import json
-import multiprocessing
 from pathlib import Path
 
 import numpy as np
@@ -22,8 +21,8 @@ from ..compare import CHANNELS, model_for, nrmse, recorded, rig_model, shrink, s
 from ..identify import identify_recordings
 from ..identify.preprocess import prepare
 from ..outputs import OutputSet
-from ..recording import check_distinct, check_same_rig, read_checked
-from .attribute import ABS_FLOOR, CANDIDATES, NOISE_FACTOR, attribute
+from ..recording import check_distinct, check_no_duplicates, check_same_rig, read_checked
+from .attribute import ABS_FLOOR, CANDIDATES, NOISE_FACTOR, attribute, may_start_processes
 from .confirm import agreement, confirm
 from .localise import localise
 
@@ -48,9 +47,11 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
     out = Path(out_dir)
     fit_recs = read_checked(fit_paths, role="fit recording")
     hold_recs = read_checked(hold_paths, role="holdout")
+    check_same_rig(fit_recs + hold_recs)
+    check_no_duplicates(fit_recs)
+    check_no_duplicates(hold_recs, "holdout")
     for h in hold_recs:
         check_distinct(fit_recs, h)
-    check_same_rig(fit_recs + hold_recs)
     still = [str(r.path) for r in fit_recs + hold_recs if float(np.ptp(recorded(r)["x"])) < MIN_TRAVEL]
     if still:
         doc = {"judgeable": False,
@@ -79,8 +80,9 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
         verdict_fx = best.params if "+" in best.name else {best.name: best.params}
         verdict_values = best.values or values      # a friction effect's own load
     # the FMUs confirm the result in another process while the report is drawn here (in
-    # this one where it may start none: a daemon process, such as a Dask nanny's worker)
-    pool = None if multiprocessing.current_process().daemon else ProcessPoolExecutor(1)
+    # this one, after it, where it may start none: a daemon process, or a Dask worker of
+    # any kind, whose cases must be rescheduled at once if it is killed)
+    pool = ProcessPoolExecutor(1) if may_start_processes() else None
     confirming = pool.submit(confirm, values, verdict_fx, hold, ssp, verdict_values) if pool else None
     rig = rig_model(hold)            # the holdout's rig, from its sidecar, for all that follows
     prep = prepare(hold, geometry=rig.geometry, P_atm=rig.P_atm)

@@ -15,10 +15,17 @@ For each ``fmus/<name>/<name>_fmu.py`` this
 4. puts the status shim (``status_shim.c``) in front of pythonfmu's binaries: on Linux
    always, on Windows where the build has mingw-w64 (``x86_64-w64-mingw32-gcc``).  The
    shim loads the Python runtime the FMU was built with (recorded in
-   ``resources/boomfmi_runtime.txt``) in a host that has none, says why when it cannot,
-   and makes a rejected parameter return fmi2Error instead of fmi2Fatal;
-   ``modelDescription.xml`` states the platforms in a ``VendorAnnotations`` tool entry;
+   ``resources/boomfmi_runtime.txt``) in a host that has none, starts its interpreter
+   (a wrong PYTHONHOME is fmi2Error, not a fatal exit), says why when it cannot, makes a
+   rejected parameter return fmi2Error instead of fmi2Fatal and lets a plain C host
+   exit cleanly; ``modelDescription.xml`` states the platforms in a
+   ``VendorAnnotations`` tool entry;
 5. validates the result with ``fmpy.validation.validate_fmu``.
+
+No path of the build's venv or checkout goes into an FMU.  Each states the Python
+version and packages it needs (``resources/boomfmi_requirements.txt``, checked by
+``fmu_requirements.py`` before the script imports anything else); a portable build
+(``build_fmu(..., portable=True)``, ``build_fmus.py --portable``) carries them too.
 """
 from __future__ import annotations
 
@@ -37,6 +44,12 @@ from ..units import UNITS
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[1]   # src/boomfmi
 SHIM_SOURCE = Path(__file__).with_name("status_shim.c")
+#: Checked in the FMU before anything else is imported: copied into each bundle
+REQUIREMENTS_CHECK = Path(__file__).with_name("fmu_requirements.py")
+#: resources/<this>: the Python version and packages an FMU needs, what it carries
+REQUIREMENTS_NAME = "boomfmi_requirements.txt"
+#: The packages beyond the standard library that an FMU's Python code imports
+THIRD_PARTY = ("numpy",)
 
 
 class BuildError(RuntimeError):
@@ -48,8 +61,41 @@ def bundle_name(name: str) -> str:
     return f"boomfmi_{name}_lib"
 
 
-def stage(fmu_dir: Path, staging: Path) -> Path:
-    """Copy the FMU script and its private bundle into ``staging``; return the script."""
+def requirements(portable: tuple[str, ...] = ()) -> str:
+    """resources/boomfmi_requirements.txt (read by ``fmu_requirements.py`` in the FMU): this
+    build's Python version, each package of :data:`THIRD_PARTY` as a range around the
+    version built with (same major version, at least its minor), and the platforms whose
+    packages the FMU carries."""
+    lines = ["# What this FMU's Python code needs, checked at fmi2Instantiate (boomfmi.fmubuild).",
+             "# A portable FMU carries these packages for each platform listed under portable=,",
+             "# in resources/python/<platform>/; elsewhere the Python that runs the FMU must have them.",
+             f"python={sys.version_info.major}.{sys.version_info.minor}"]
+    for name in THIRD_PARTY:
+        version = importlib.import_module(name).__version__
+        major, minor = (int(x) for x in version.split(".")[:2])
+        lines.append(f"require={name}>={major}.{minor},<{major + 1} built={version}")
+    lines.append(f"portable={' '.join(portable)}")
+    return "\n".join(lines) + "\n"
+
+
+def _import_bundle_first(source: str, bundle: str) -> str:
+    """The script with ``import <bundle>`` before its first import (after the docstring
+    and any ``from __future__`` line), so that the FMU's requirements are checked (and a
+    portable FMU's packages put on sys.path) before anything else is imported."""
+    import ast
+    body = ast.parse(source).body
+    first = next((node for node in body if isinstance(node, (ast.Import, ast.ImportFrom))
+                  and not (isinstance(node, ast.ImportFrom) and node.module == "__future__")), None)
+    line = (first.lineno if first is not None else len(source.splitlines()) + 1) - 1
+    lines = source.splitlines(keepends=True)
+    return "".join(lines[:line] + [f"import {bundle}  # first: checks the FMU's requirements (added by boomfmi.fmubuild)\n"]
+                   + lines[line:])
+
+
+def stage(fmu_dir: Path, staging: Path, portable: tuple[str, ...] = ()) -> Path:
+    """Copy the FMU script (importing its bundle first) and its private bundle into
+    ``staging``, with ``staging/boomfmi_requirements.txt`` (:func:`requirements`); return
+    the script."""
     name = fmu_dir.name
     script = fmu_dir / f"{name}_fmu.py"
     if not script.is_file():
@@ -57,11 +103,15 @@ def stage(fmu_dir: Path, staging: Path) -> Path:
     if f"from {bundle_name(name)}" not in script.read_text():
         raise BuildError(f"{script}: must import its physics from {bundle_name(name)}")
     staging.mkdir(parents=True, exist_ok=True)
-    shutil.copy2(script, staging / script.name)
+    (staging / script.name).write_text(_import_bundle_first(script.read_text(), bundle_name(name)))
     bundle = staging / bundle_name(name)
     bundle.mkdir()
     (bundle / "__init__.py").write_text(
-        f'"""The physics and model of the boomfmi {name} FMU: a private copy of boomfmi."""\n')
+        f'"""The physics and model of the boomfmi {name} FMU: a private copy of boomfmi."""\n'
+        "from ._requirements import check as _check\n\n"
+        "_check()       # resources/boomfmi_requirements.txt, before numpy is imported\n")
+    shutil.copy2(REQUIREMENTS_CHECK, bundle / "_requirements.py")
+    (staging / REQUIREMENTS_NAME).write_text(requirements(portable))
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
     shutil.copytree(PACKAGE_ROOT / "physics", bundle / "physics", ignore=ignore)
     # the assembled model and its catalogue of effects; not the scipy reference solver
@@ -271,17 +321,75 @@ def runtime_record() -> str:
         "# The Python runtime this FMU was built with (boomfmi.fmubuild).  In a host that has",
         "# no Python of its own the FMU's binary loads <platform>.libpython (else <platform>.soname",
         f"# from the loader's search path; ${LIBPYTHON_ENV} overrides both) and starts it with",
-        "# PYTHONHOME=<platform>.home and PYTHONPATH=<platform>.path unless those are set.",
+        "# PYTHONHOME=<platform>.home (only for the recorded libpython, and unless PYTHONHOME is",
+        "# set).  No site-packages of the build is recorded: the packages the FMU needs are in",
+        f"# {REQUIREMENTS_NAME}, and a portable build carries them (resources/python/<platform>/).",
         f"version={version}",
         f"{tag}.libpython={libpython}",
         f"{tag}.soname={soname}",
         f"{tag}.home={sys.base_prefix}",
-        f"{tag}.path={os.pathsep.join(paths)}",
     ]
     return "\n".join(lines) + "\n"
 
 
-def _platform_notes(shims: dict[str, Path]) -> dict[str, str]:
+#: pip's --platform of each FMI platform, for a portable build's packages of another platform
+WHEEL_PLATFORMS = {"linux64": "manylinux2014_x86_64", "win64": "win_amd64"}
+#: Where a portable build keeps the wheels it downloads ($BOOMFMI_WHEELS overrides)
+WHEEL_CACHE = Path.home() / ".cache" / "boomfmi" / "wheels"
+
+
+def _carried(relative: Path) -> bool:
+    """Whether a portable FMU carries this file of a package (not its tests or caches)."""
+    return not ({"tests", "__pycache__"} & set(relative.parts)) and relative.suffix != ".pyc"
+
+
+def _wheel(name: str, version: str, platform: str) -> Path:
+    """The CPython wheel of ``name==version`` for ``platform``, downloaded once by pip."""
+    cache = Path(os.environ.get("BOOMFMI_WHEELS", WHEEL_CACHE))
+    py = f"{sys.version_info.major}{sys.version_info.minor}"
+    pattern = f"{name}-{version}-cp{py}-*{WHEEL_PLATFORMS[platform].split('_', 1)[-1]}.whl"
+    found = sorted(cache.glob(pattern))
+    if not found:
+        cmd = [sys.executable, "-m", "pip", "download", f"{name}=={version}", "--only-binary", ":all:",
+               "--no-deps", "--platform", WHEEL_PLATFORMS[platform], "--python-version", py,
+               "--implementation", "cp", "-d", str(cache)]
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        found = sorted(cache.glob(pattern))
+        if proc.returncode != 0 or not found:
+            raise BuildError(f"--portable: no {name} {version} wheel for {platform} ({pattern} in {cache}); "
+                             f"{' '.join(cmd)} said:\n{(proc.stderr or proc.stdout).strip()[-1500:]}")
+    return found[-1]
+
+
+def portable_packages(platform: str, folder: Path) -> Path:
+    """The packages of :data:`THIRD_PARTY` for ``platform``, laid out as a site-packages in
+    ``folder``: this build's own where it runs on that platform, else the wheel of the
+    same version (:func:`_wheel`).  Tests and caches are left out."""
+    import platform as host
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in THIRD_PARTY:
+        module = importlib.import_module(name)
+        version = module.__version__
+        if platform == _platform_tag() and host.machine().lower() in ("x86_64", "amd64"):
+            package = Path(module.__file__).resolve().parent
+            site = package.parent
+            for item in [package, site / f"{name}.libs", *site.glob(f"{name}-{version}.dist-info")]:
+                if not item.is_dir():
+                    continue
+                for file in item.rglob("*"):
+                    relative = file.relative_to(site)
+                    if file.is_file() and _carried(relative):
+                        (folder / relative).parent.mkdir(parents=True, exist_ok=True)
+                        shutil.copy2(file, folder / relative)
+        else:
+            with zipfile.ZipFile(_wheel(name, version, platform)) as wheel:
+                for member in wheel.namelist():
+                    if not member.endswith("/") and _carried(Path(member)):
+                        wheel.extract(member, folder)
+    return folder
+
+
+def _platform_notes(shims: dict[str, Path], portable=()) -> dict[str, str]:
     version = f"{sys.version_info.major}.{sys.version_info.minor}"
     dll = f"python{sys.version_info.major}{sys.version_info.minor}.dll"
     built_here = _platform_tag()
@@ -298,8 +406,13 @@ def _platform_notes(shims: dict[str, Path]) -> dict[str, str]:
         else:
             found = (f"Python {version}: the {dll} the Python installer registered (PEP 514), "
                      f"else {dll} on PATH")
+        packages = ", ".join(THIRD_PARTY)
+        needs = (f"{packages} is inside the FMU (resources/python/{platform}/): only a CPython {version} is needed"
+                 if platform in portable else
+                 f"that Python must have {packages} as resources/{REQUIREMENTS_NAME} states (checked at "
+                 f"fmi2Instantiate, which names what is missing)")
         notes[platform] = (f"{os_name}, status shim in front of pythonfmu's {library}; {anywhere} "
-                           f"${LIBPYTHON_ENV}, else {found}; that Python must have numpy")
+                           f"${LIBPYTHON_ENV}, else {found}; {needs}")
     if "win64" in shims and built_here != "win64":
         notes["win64"] += " (not run on Windows by boomfmi's tests)"
     if "win64" not in shims:
@@ -308,7 +421,7 @@ def _platform_notes(shims: dict[str, Path]) -> dict[str, str]:
     return notes
 
 
-def platform_annotation(xml: bytes, model_identifier: str, shims: dict[str, Path]) -> bytes:
+def platform_annotation(xml: bytes, model_identifier: str, shims: dict[str, Path], portable=()) -> bytes:
     """State in an FMI 2.0 modelDescription.xml (``VendorAnnotations``, tool ``boomfmi``)
     the platforms the FMU's binaries run on, and those it has none for."""
     root = ET.fromstring(xml)
@@ -324,7 +437,7 @@ def platform_annotation(xml: bytes, model_identifier: str, shims: dict[str, Path
             vendor.remove(tool)
     tool = ET.SubElement(vendor, "Tool", name="boomfmi")
     platforms = ET.SubElement(tool, "Platforms")
-    for name, note in _platform_notes(shims).items():
+    for name, note in _platform_notes(shims, portable).items():
         suffix = SHIM_PLATFORMS[name][1]
         ET.SubElement(platforms, "Platform", name=name, binary=f"binaries/{name}/{model_identifier}{suffix}",
                       shim="true" if name in shims else "false", description=note)
@@ -335,15 +448,17 @@ def platform_annotation(xml: bytes, model_identifier: str, shims: dict[str, Path
 
 
 def _rewrite(fmu: Path, model_description: bytes, model_identifier: str, shim,
-             win64_shim: Path | None = None) -> None:
+             win64_shim: Path | None = None, packages: dict[str, Path] | None = None) -> None:
     """Replace modelDescription.xml (stating the platforms), put the shims in front of
     pythonfmu's binaries and record the build's Python runtime.  ``shim`` is the Linux
-    shim, or a ``{platform: shim}`` mapping as :func:`compile_shims` returns."""
+    shim, or a ``{platform: shim}`` mapping as :func:`compile_shims` returns.  A portable
+    build's ``packages`` ({platform: folder}, :func:`portable_packages`) go to
+    ``resources/python/<platform>/``."""
     shims = dict(shim) if isinstance(shim, dict) else {"linux64": Path(shim)}
     if win64_shim is not None:
         shims["win64"] = Path(win64_shim)
     binaries = {f"binaries/{p}/{model_identifier}{SHIM_PLATFORMS[p][1]}": p for p in shims}
-    model_description = platform_annotation(model_description, model_identifier, shims)
+    model_description = platform_annotation(model_description, model_identifier, shims, tuple(packages or ()))
     tmp = fmu.with_suffix(".tmp")
     with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as dst:
         names = src.namelist()
@@ -363,11 +478,21 @@ def _rewrite(fmu: Path, model_description: bytes, model_identifier: str, shim,
             else:
                 dst.writestr(src.getinfo(name), src.read(name))
         dst.writestr(RUNTIME_RECORD, runtime_record())
+        for platform, folder in (packages or {}).items():
+            for file in sorted(folder.rglob("*")):
+                if file.is_file():
+                    dst.write(file, f"resources/python/{platform}/{file.relative_to(folder).as_posix()}")
     tmp.replace(fmu)
 
 
-def build_fmu(fmu_dir: Path, out_dir: Path) -> Path:
-    """Build ``fmus/<name>`` into ``out_dir/<name>.fmu``; return its path."""
+def build_fmu(fmu_dir: Path, out_dir: Path, portable: bool | tuple[str, ...] = False) -> Path:
+    """Build ``fmus/<name>`` into ``out_dir/<name>.fmu``; return its path.
+
+    Lean by default: the FMU states the Python version and packages it needs
+    (resources/boomfmi_requirements.txt) and names what is missing at fmi2Instantiate.
+    ``portable`` also puts those packages inside, for each platform it has binaries for
+    (or for the platforms it names), so that the host needs only a CPython runtime of
+    the build's version."""
     from pythonfmu.builder import FmuBuilder, get_model_class
 
     fmu_dir = Path(fmu_dir).resolve()
@@ -377,14 +502,17 @@ def build_fmu(fmu_dir: Path, out_dir: Path) -> Path:
     target = out_dir / f"{name}.fmu"
     with tempfile.TemporaryDirectory(prefix=f"boomfmi_{name}_") as tmp:
         tmp = Path(tmp)
-        script = stage(fmu_dir, tmp / "stage")
+        platforms = tuple(SHIM_PLATFORMS) if portable is True else tuple(portable or ())
+        script = stage(fmu_dir, tmp / "stage", platforms)
         bundle = tmp / "stage" / bundle_name(name)
+        # laid out as in the FMU's resources/, where the staged script's check looks for them
+        packages = {p: portable_packages(p, tmp / "stage" / "python" / p) for p in platforms}
         sys.path.insert(0, str(script.parent))
         try:
-            FmuBuilder.build_FMU(script, dest=target, project_files=[bundle])
+            FmuBuilder.build_FMU(script, dest=target, project_files=[bundle, script.parent / REQUIREMENTS_NAME])
             cls = get_model_class(script)
         finally:
-            sys.path.remove(str(script.parent))
+            sys.path[:] = [p for p in sys.path if not p.startswith(str(script.parent))]
             for mod in [m for m in sys.modules if m == script.stem or m.startswith(bundle_name(name))]:
                 del sys.modules[mod]
             importlib.invalidate_caches()
@@ -394,7 +522,7 @@ def build_fmu(fmu_dir: Path, out_dir: Path) -> Path:
         if model_identifier != name:
             raise BuildError(f"{script.name}: modelName must be {name!r}, is {model_identifier!r}")
         xml = complete_model_description(xml, cls.variables)
-        _rewrite(target, xml, model_identifier, compile_shims(tmp))
+        _rewrite(target, xml, model_identifier, compile_shims(tmp), packages=packages)
     validate(target)
     return target
 

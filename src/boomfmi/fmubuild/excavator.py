@@ -17,6 +17,7 @@ from xml.etree import ElementTree as ET
 from ..model.excavator_reference import ExcavatorMachine
 from ..physics.excavator import JOINTS
 from ..system.ssv import NS, write_ssv
+from .ssp import component_fmu
 
 SET_NAME = "excavator"
 #: The linkage's longest substep in the excavator SSP [s] (its FMU's default: 0.25 ms).
@@ -44,7 +45,7 @@ def excavator_parameters_ssv(ssd: Path, fmu_dir: Path, out: Path) -> Path:
     params: dict = {}
     for comp in ET.parse(ssd).getroot().iter(f"{{{NS['ssd']}}}Component"):
         name = comp.get("name")
-        md = read_model_description(str(Path(fmu_dir) / comp.get("source").removeprefix("resources/")))
+        md = read_model_description(str(component_fmu(ssd, comp, fmu_dir)))
         for v in md.modelVariables:
             if v.causality != "parameter":
                 continue

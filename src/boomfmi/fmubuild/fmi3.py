@@ -44,7 +44,7 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from . import BuildError, bundle_name, compile_shim, complete_model_description, stage, validate
+from . import REQUIREMENTS_NAME, BuildError, bundle_name, compile_shim, complete_model_description, stage, validate
 
 #: The FMUs built for FMI 3.0 (not the hardware bridge).
 FMI3_NAMES = ("valve", "cylinder", "boom_load", "force_estimator", "linkage")
@@ -398,7 +398,8 @@ def build_fmu3(fmu_dir: Path, out_dir: Path, shim: Path | None = None) -> Path:
         script = stage3(fmu_dir, tmp / "stage")
         try:
             built = FmuBuilder.build_FMU(script, dest=tmp / "out",
-                                         project_files=[tmp / "stage" / bundle_name3(name)],
+                                         project_files=[tmp / "stage" / bundle_name3(name),
+                                                        tmp / "stage" / REQUIREMENTS_NAME],
                                          canHandleVariableCommunicationStepSize=True)
         finally:
             _forget(name)

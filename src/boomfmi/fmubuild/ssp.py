@@ -23,6 +23,7 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
+from ..names import member_problem
 from ..system.ssv import NS, read_ssv, write_ssv
 from . import BuildError
 
@@ -62,6 +63,17 @@ def component_parameter_set(source_dir: Path, file_name: str, component: str) ->
         return out.read_bytes()
 
 
+def component_fmu(ssd: Path, component, fmu_dir: Path) -> Path:
+    """The FMU file in ``fmu_dir`` that ``ssd``'s ``component`` element takes from
+    ``resources/``; a source that would leave ``fmu_dir`` is refused."""
+    source = component.get("source")
+    problem = member_problem(source)
+    if problem or not source.startswith("resources/"):
+        raise BuildError(f"{ssd}: component {component.get('name')!r}: source {source!r} must lie under "
+                         f"resources/" + (f": {problem}" if problem else ""))
+    return Path(fmu_dir) / source.removeprefix("resources/")
+
+
 def fmus_of(ssd: Path) -> set[str]:
     """The names of the FMUs that ``ssd``'s components take from ``resources/``
     (``resources/valve.fmu`` -> ``valve``)."""
@@ -90,6 +102,11 @@ def pack_ssp(ssd: Path, fmu_dir: Path, out: Path) -> Path:
         raise BuildError(f"{ssd}: input connector(s) {', '.join(loose)} end no connection; fmpy's "
                          f"SSP runner would wire them to another connection's source.  Leave a "
                          f"free input undeclared (it is set by variable name)")
+    for source, _ in referenced_sources(ssd):      # never a file outside fmu_dir or ssd's folder
+        problem = member_problem(source)
+        if problem or not source.startswith("resources/"):
+            raise BuildError(f"{ssd}: source {source!r} must lie under resources/"
+                             + (f": {problem}" if problem else ""))
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_suffix(".tmp")
@@ -100,8 +117,6 @@ def pack_ssp(ssd: Path, fmu_dir: Path, out: Path) -> Path:
             if source in written:           # one FMU serving several components is packed once
                 continue
             written.add(source)
-            if not source.startswith("resources/"):
-                raise BuildError(f"{ssd}: source {source!r} must lie under resources/")
             name = source.removeprefix("resources/")
             origin = (fmu_dir / name) if name.endswith(".fmu") else (ssd.parent / name)
             if origin.is_file():
@@ -121,13 +136,12 @@ def write_reference_parameters(ssds: list[Path], fmu_dir: Path, out: Path) -> Pa
     reference rig's)."""
     from fmpy import read_model_description
     params: dict[str, tuple[float, str | None]] = {}
-    comps = [c for ssd in ssds for c in ET.parse(ssd).getroot().iter(f"{{{NS['ssd']}}}Component")
+    comps = [(Path(ssd), c) for ssd in ssds for c in ET.parse(ssd).getroot().iter(f"{{{NS['ssd']}}}Component")
              if any(b.get("source", "").startswith("resources/reference_rig_")
                     for b in c.iter(f"{{{NS['ssd']}}}ParameterBinding"))]
-    for comp in comps:
+    for ssd, comp in comps:
         name = comp.get("name")
-        fmu = Path(fmu_dir) / comp.get("source").removeprefix("resources/")
-        md = read_model_description(str(fmu))
+        md = read_model_description(str(component_fmu(ssd, comp, fmu_dir)))
         for v in md.modelVariables:
             if v.causality == "parameter" and v.type == "Real":
                 params[f"{name}.{v.name}"] = (float(v.start), v.unit)

@@ -11,10 +11,12 @@
  *  1. The Python runtime.  In a host without Python (a C or C++ tool) fmi2Instantiate
  *     first loads the Python the FMU was built with, as resources/boomfmi_runtime.txt
  *     records it (or $BOOMFMI_LIBPYTHON), globally, so that pythonfmu's library and
- *     numpy's extensions find its symbols; on Linux it also points the interpreter that
- *     pythonfmu is about to start at the build's home and site-packages (PYTHONHOME and
- *     PYTHONPATH, each only if the environment does not set it, and only for the
- *     duration of that first fmi2Instantiate).  In a Python host (fmpy, libcosim's
+ *     numpy's extensions find its symbols; on Linux it also points the interpreter it
+ *     starts at the build's home (PYTHONHOME, only for the build's own libpython and only
+ *     if the environment does not set it, for the duration of that first
+ *     fmi2Instantiate).  No site-packages of the build is used: the FMU's Python code
+ *     checks its requirements (resources/boomfmi_requirements.txt) and a portable build
+ *     carries its packages.  In a Python host (fmpy, libcosim's
  *     Python bindings) the interpreter is already running and nothing of this happens.
  *     When no runtime can be loaded, fmi2Instantiate logs what it looked for and why
  *     each candidate failed, at fmi2Error, and returns NULL.
@@ -32,7 +34,14 @@
  *     fmi2FreeInstance does not hand pythonfmu an object it has already released.
  *     The failing call itself returns fmi2Error: other instances are unaffected.
  *  5. Messages reach the host's logger as "%s" arguments (pythonfmu passes them as the
- *     format string); warnings and errors always, the rest only with debug logging on.
+ *     format string); warnings and errors always, the rest only with debug logging on;
+ *     pythonfmu's fmi2Fatal as fmi2Error, the status the call returns.
+ *  6. No fatal error inside an FMI call: in a host without Python the shim starts the
+ *     interpreter itself (start_interpreter), after checking that PYTHONHOME, if set,
+ *     holds the runtime's standard library; a start that fails is fmi2Error and NULL from
+ *     fmi2Instantiate, naming the variable and what it found, never "Fatal Python error".
+ *  7. A clean exit: pythonfmu's interpreter state is released before its static
+ *     destructors run (release_inner_state; PythonFMU pull request 213's exit handler).
  *
  * Built by boomfmi.fmubuild with the FMI headers that fmpy ships: cc on Linux,
  * x86_64-w64-mingw32-gcc for Windows (the #ifdef _WIN32 parts).
@@ -43,6 +52,7 @@
 #include <psapi.h>
 #else
 #define _GNU_SOURCE
+#include <dirent.h>
 #include <dlfcn.h>
 #include <sys/stat.h>
 #endif
@@ -102,6 +112,10 @@ typedef struct {
  * shim loads is never closed: an interpreter cannot be unloaded. */
 static Library inner_lib = NULL;
 static int live_instances = 0;
+#ifndef _WIN32
+/* pythonfmu's finalizePythonInterpreter (see release_inner_state). */
+static void (*finalize_inner)(void) = NULL;
+#endif
 static struct {
 #define DECLARE(fn) fn##TYPE *fn;
     FMI2_CS_FUNCTIONS(DECLARE)
@@ -332,6 +346,156 @@ static void restore_environment(void) {}
 
 typedef int PyIsInitializedFn(void);
 
+/* Starting the interpreter.  In a host without Python the shim starts it itself, before
+ * pythonfmu's library is loaded, with Py_InitializeFromConfig (Python 3.8 on), which
+ * returns a failure as a PyStatus where Py_Initialize (what pythonfmu calls) ends the
+ * process with "Fatal Python error".  pythonfmu then finds it running and never starts
+ * or finalises one of its own (its PyState keeps no interpreter), so that the
+ * interpreter's life no longer hangs on pythonfmu's static objects (see
+ * release_inner_state).  The config is Py_Initialize's own (_PyConfig_InitCompatConfig)
+ * where the runtime exports it, else the "Python" config; either reads PYTHONHOME and
+ * PYTHONPATH from the environment.  The interpreter is never finalised. */
+typedef struct {            /* PyStatus, the same layout from Python 3.8 on */
+    int type;               /* 0 ok, 1 error, 2 exit */
+    const char *func;
+    const char *err_msg;
+    int exitcode;
+} PyStatusABI;
+typedef void PyConfigInitFn(void *config);
+typedef PyStatusABI PyInitializeFromConfigFn(const void *config);
+typedef void PyConfigClearFn(void *config);
+typedef void *PyEvalSaveThreadFn(void);
+typedef const char *PyGetVersionFn(void);
+
+/* Why the interpreter could not start: it cannot be started twice in one process. */
+static char start_failure[TEXT_CHARS];
+
+#ifdef _WIN32
+static void *runtime_symbol(const char *name) {
+    HMODULE modules[1024];
+    DWORD needed = 0, i, count;
+    if (!EnumProcessModules(GetCurrentProcess(), modules, sizeof modules, &needed)) return NULL;
+    count = needed / sizeof(HMODULE);
+    if (count > 1024) count = 1024;
+    for (i = 0; i < count; i++) {
+        if (GetProcAddress(modules[i], "Py_IsInitialized")) return (void *)GetProcAddress(modules[i], name);
+    }
+    return NULL;
+}
+#define SEP "\\"
+#define STDLIB_DIR "Lib%.0s"      /* the version is not part of it on Windows */
+#else
+static void *runtime_symbol(const char *name) { return dlsym(RTLD_DEFAULT, name); }
+#define SEP "/"
+#define STDLIB_DIR "lib" SEP "python%s"
+#endif
+
+/* PYTHONHOME, when set, must hold the standard library of the runtime's version: else
+ * the interpreter cannot import encodings and (through Py_Initialize) ends the process. */
+static int check_home(const char *runtime, const char *version, char *why, size_t why_size) {
+    const char *home = getenv("PYTHONHOME");
+    char prefix[PATH_CHARS], stdlib[PATH_CHARS + 64], encodings[PATH_CHARS + 96], found[TEXT_CHARS] = "";
+    FILE *f;
+    size_t n;
+    if (!home || !home[0]) return 1;
+    n = strcspn(home, ":");         /* prefix[:exec_prefix] */
+#ifdef _WIN32
+    n = strlen(home);
+#endif
+    snprintf(prefix, sizeof prefix, "%.*s", (int)n, home);
+    snprintf(stdlib, sizeof stdlib, "%s" SEP STDLIB_DIR, prefix, version);
+    snprintf(encodings, sizeof encodings, "%s" SEP "encodings" SEP "__init__.py", stdlib);
+    f = open_text(encodings);
+    if (f) {
+        fclose(f);
+        return 1;
+    }
+    snprintf(found, sizeof found, "%s: %s", encodings, strerror(errno));
+#ifndef _WIN32
+    {
+        char lib[PATH_CHARS + 8];
+        DIR *d;
+        struct dirent *e;
+        int any = 0;
+        snprintf(lib, sizeof lib, "%s/lib", prefix);
+        d = opendir(lib);
+        if (!d) {
+            append(found, sizeof found, "; %s: %s", lib, strerror(errno));
+        } else {
+            while ((e = readdir(d)) != NULL) {
+                if (strncmp(e->d_name, "python", 6) != 0) continue;
+                append(found, sizeof found, any ? ", %s%s" : "; it holds the standard library of another Python: %s%s",
+                       e->d_name, NULL);
+                any = 1;
+            }
+            closedir(d);
+            if (!any) append(found, sizeof found, "; %s holds no python3.X folder%s", lib, NULL);
+        }
+    }
+#endif
+    snprintf(why, why_size,
+             "PYTHONHOME=%s does not hold the standard library of Python %s, the runtime this FMU "
+             "loaded (%s): %s. The interpreter cannot start with it; unset PYTHONHOME, or set it to "
+             "that Python's prefix (the folder that holds " STDLIB_DIR ").",
+             home, version, runtime, found, version);
+    return 0;
+}
+
+static int start_interpreter(const char *runtime, char *why, size_t why_size) {
+    static double config[1024];     /* a PyConfig: 424 bytes in Python 3.11, room for later ones */
+    PyConfigInitFn *config_init = (PyConfigInitFn *)runtime_symbol("_PyConfig_InitCompatConfig");
+    PyInitializeFromConfigFn *init = (PyInitializeFromConfigFn *)runtime_symbol("Py_InitializeFromConfig");
+    PyConfigClearFn *clear = (PyConfigClearFn *)runtime_symbol("PyConfig_Clear");
+    PyEvalSaveThreadFn *save = (PyEvalSaveThreadFn *)runtime_symbol("PyEval_SaveThread");
+    PyGetVersionFn *get_version = (PyGetVersionFn *)runtime_symbol("Py_GetVersion");
+    PyStatusABI status;
+    char version[32] = "";
+    const char *v, *home, *path;
+    if (start_failure[0]) {
+        snprintf(why, why_size, "%s", start_failure);
+        return 0;
+    }
+    if (!config_init) config_init = (PyConfigInitFn *)runtime_symbol("PyConfig_InitPythonConfig");
+    if (!config_init || !init || !clear || !save || !get_version) {
+        snprintf(why, why_size, "the Python runtime %s has no Py_InitializeFromConfig: it is older than "
+                 "Python 3.8; this FMU needs Python %s", runtime, record.version[0] ? record.version : "3");
+        return 0;
+    }
+    v = get_version();              /* "3.11.2 (main, ...)": safe before the start */
+    {
+        const char *dot = strchr(v, '.');
+        size_t n = dot ? strspn(dot + 1, "0123456789") + (size_t)(dot + 1 - v) : strcspn(v, " ");
+        if (n >= sizeof version) n = sizeof version - 1;
+        memcpy(version, v, n);
+        version[n] = '\0';
+    }
+    if (record.version[0] && strcmp(version, record.version) != 0) {
+        snprintf(why, why_size, "the Python runtime %s is Python %s; this FMU needs Python %s "
+                 "(set " LIBPYTHON_ENV " to a Python %s runtime's shared library)",
+                 runtime, version, record.version, record.version);
+        return 0;
+    }
+    if (!check_home(runtime, version, why, why_size)) return 0;
+    memset(config, 0, sizeof config);
+    config_init(config);
+    status = init(config);
+    clear(config);
+    if (status.type != 0) {
+        home = getenv("PYTHONHOME");
+        path = getenv("PYTHONPATH");
+        snprintf(start_failure, sizeof start_failure,
+                 "the Python runtime %s could not start: %s%s%s (exit code %d) "
+                 "(PYTHONHOME=%s, PYTHONPATH=%s); no FMU can run Python in this process now",
+                 runtime, status.func ? status.func : "", status.func ? ": " : "",
+                 status.err_msg ? status.err_msg : "no message", status.type == 2 ? status.exitcode : 1,
+                 home ? home : "(not set)", path ? path : "(not set)");
+        snprintf(why, why_size, "%s", start_failure);
+        return 0;
+    }
+    save();                         /* release the GIL: pythonfmu takes it per call */
+    return 1;
+}
+
 /* Try one candidate for the runtime; note the failure in `tried`. */
 static Library try_runtime(const char *candidate, char *tried, size_t tried_size) {
     char err[1024];
@@ -455,12 +619,32 @@ static int ensure_python(char *why, size_t why_size, char *runtime, size_t runti
 #else
     point_interpreter_at_build(runtime);
 #endif
-    return 1;
+    return start_interpreter(runtime, why, why_size);
 }
 
 /* ------------------------------------------------------------------------------------
  * pythonfmu's library.
  * ------------------------------------------------------------------------------------ */
+
+#ifndef _WIN32
+/* pythonfmu 0.7.0 keeps its interpreter state in a static std::shared_ptr (pyState, made
+ * in pythonfmu::createInstance) and resets it in a library destructor
+ * (finalizePythonInterpreter), the change of PythonFMU pull request 213 ("Fix the crash
+ * that occurs on the second attempt to instantiate the FMU").  Its library cannot be
+ * unloaded (dlclose leaves it mapped), so both run at process exit, in the wrong order:
+ * the shared_ptr's static destructor (an exit handler) frees the PyState first, then the
+ * library destructor assigns to the destroyed shared_ptr and frees the block again:
+ * "free(): corrupted unsorted chunks", exit status 134, in a plain C host that had
+ * returned 0 from main (valgrind: an invalid read in finalizePythonInterpreter of a
+ * block an exit handler freed).  The shim calls finalizePythonInterpreter itself
+ * before either: from an exit handler registered after pythonfmu's library was loaded
+ * (so it runs before that library's static destructors), and when the host unloads
+ * this library.  Calling it is harmless at any time: the interpreter is the shim's or
+ * the host's (start_interpreter), so the PyState it releases holds none. */
+static void release_inner_state(void) {
+    if (finalize_inner) finalize_inner();
+}
+#endif
 
 static int load_inner(char *why, size_t why_size) {
     char path[PATH_CHARS], err[1024];
@@ -501,6 +685,10 @@ static int load_inner(char *why, size_t why_size) {
 #define LOOKUP(fn) inner.fn = (fn##TYPE *)library_symbol(inner_lib, #fn);
     FMI2_CS_FUNCTIONS(LOOKUP)
 #undef LOOKUP
+#ifndef _WIN32
+    finalize_inner = (void (*)(void))library_symbol(inner_lib, "finalizePythonInterpreter");
+    if (finalize_inner) atexit(release_inner_state);
+#endif
     if (inner.fmi2Instantiate == NULL || inner.fmi2DoStep == NULL) {
         snprintf(why, why_size, "%s is not an FMI 2.0 co-simulation library", path);
         return 0;
@@ -517,8 +705,9 @@ static void shim_logger(fmi2ComponentEnvironment env, fmi2String instanceName,
         free(s->last_error);
         s->last_error = strdup(message);
     }
+    /* pythonfmu logs an exception with fmi2Fatal; the call returns fmi2Error (finish) */
     if (s->host.logger && (status >= fmi2Warning || s->debug_logging))
-        s->host.logger(s->host.componentEnvironment, instanceName, status,
+        s->host.logger(s->host.componentEnvironment, instanceName, status == fmi2Fatal ? fmi2Error : status,
                        category ? category : "logAll", "%s", message ? message : "");
 }
 
@@ -579,6 +768,8 @@ static fmi2Status finish(Shim *s, fmi2Status st) {
  * (On Windows it stays: FreeLibrary must not be called while the loader unloads us.) */
 __attribute__((destructor)) static void unload_inner(void) {
     if (inner_lib && live_instances == 0) {
+        release_inner_state();
+        finalize_inner = NULL;
         dlclose(inner_lib);
         inner_lib = NULL;
     }

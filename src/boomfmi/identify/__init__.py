@@ -13,7 +13,7 @@ from pathlib import Path
 from .._json import dumps, plain
 from ..compare import nrmse, recorded, rig_model, simulate_recording
 from ..outputs import OutputSet
-from ..recording import check_distinct, check_same_rig, read_checked, read_recording
+from ..recording import check_distinct, check_no_duplicates, check_same_rig, read_checked, recording_inputs
 from ..system.ssv import write_ssv
 from .fit import FitResult, fit_A_max, identify
 from .paper import identify_paper
@@ -32,6 +32,7 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
         raise ValueError(f"unknown method {method!r}: 'paper' or 'fit'")
     recs = read_checked(paths)
     check_same_rig(recs)
+    check_no_duplicates(recs)
     rig = rig_model(recs[0])
     preps = [prepare(r, cutoff, geometry=rig.geometry, P_atm=rig.P_atm) for r in recs]
     if method == "fit":
@@ -127,8 +128,9 @@ def write_outputs(result: FitResult, recs, out, holdout=()) -> dict:
     (:class:`OutputSet`: all or none; a file this run does not write is removed, so no
     earlier run's passes for this one's).  ``doc["written"]`` lists the files."""
     out = Path(out)
-    for h in holdout:
-        check_distinct(recs, read_recording(h))
+    holds = read_checked(holdout, role="holdout")     # the same checks as the fit recordings'
+    for h in holds:
+        check_distinct(recs, h)
     values = result.values()
     doc = {"method": result.method,
            "params": {k: {"value": e.value, "ci95": list(e.ci95), "unit": e.unit}
@@ -137,12 +139,12 @@ def write_outputs(result: FitResult, recs, out, holdout=()) -> dict:
            "details": plain(result.details)}
     finite = {k: v for k, v in values.items() if math.isfinite(v)}
     doc["nrmse_fit"] = {str(r.path): nrmse(simulate_recording(finite, r), r) for r in recs} if _usable(finite) else {}
-    for h in holdout:
-        hr = read_recording(h)
+    for hr in holds:
         doc.setdefault("nrmse_holdout", {})[str(hr.path)] = nrmse(simulate_recording(finite, hr), hr)
     physical = not any(w.startswith("not physical") for w in result.warnings)
     names = (out.name, out.with_suffix(".ssv").name, out.with_suffix(".png").name)
-    with OutputSet(out.parent, stale=names) as files:
+    with OutputSet(out.parent, stale=names,
+                   inputs=recording_inputs([*(r.path for r in recs), *(h.path for h in holds)])) as files:
         if physical:
             write_ssv(files.path(names[1]), "identified",
                       {SSP_NAMES[k]: (v, result.params[k].unit) for k, v in finite.items()},

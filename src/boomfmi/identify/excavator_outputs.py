@@ -48,7 +48,8 @@ from .._json import dumps, plain
 from ..compare import as_sensed
 from ..outputs import OutputSet
 from ..physics import excavator as exc
-from ..recording import Recording, check_distinct, check_same_rig, read_checked
+from ..recording import (Recording, check_distinct, check_no_duplicates, check_same_rig, read_checked,
+                         recording_inputs)
 from ..system.ssv import write_ssv
 from .excavator import JOINT_PARAMS, JOINTS, UNITS, identify_excavator
 from .fit import FitResult
@@ -101,6 +102,7 @@ def identify_excavator_recordings(paths, cutoff: float = CUTOFF, ex: exc.Excavat
     P_atm)."""
     recs = read_checked(paths, "excavator", "fit recording")
     check_same_rig(recs)
+    check_no_duplicates(recs)
     return identify_recs(recs, cutoff, ex)
 
 
@@ -317,7 +319,8 @@ def write_excavator_outputs(result: FitResult, recs, out, holdout=(), ex: exc.Ex
         say(f"simulating the identified machine on the holdout {h.path}")
         doc["nrmse_holdout"][str(h.path)] = excavator_nrmse(simulate_machine(h, machine, payload), h, machine)
     names = (out.name, out.with_suffix(".ssv").name, out.with_suffix(".png").name)
-    with OutputSet(out.parent, stale=names) as files:
+    with OutputSet(out.parent, stale=names,
+                   inputs=recording_inputs([*(r.path for r in recs), *(h.path for h in holds)])) as files:
         if bound:
             write_ssv(files.path(names[1]), "identified",
                       {ssp_name(k): (v, UNITS[k.rsplit("_", 1)[0] if k != "payload" else k]) for k, v in bound.items()},

@@ -1,19 +1,22 @@
 """The bridge's side of the link: one request, one authenticated answer, bounded wait.
 
 ``RigClient.exchange`` sends a command (or a status request) and waits at most
-``timeout`` seconds for the sample that answers it.  Datagrams that are malformed,
+``timeout`` seconds for the sample that answers it; the first opens a session (the
+handshake of ``protocol.py``: a hello with a fresh nonce, the rig's challenge, the
+open with its cookie) within the same deadline.  Datagrams that are malformed,
 fail authentication, answer an older request or repeat an old rig sequence number are
 dropped and counted; a missing answer returns ``None``.  Nothing here ever blocks
 past its deadline.
 """
 from __future__ import annotations
 
+import secrets
 import select
 import socket
 import time
 
-from .protocol import (BadMac, ExcavatorSampleDatagram, LinkError, Malformed, SampleDatagram, SequenceGuard,
-                       decode, encode_command, encode_excavator_command, encode_status)
+from .protocol import (BadMac, Challenge, ExcavatorSampleDatagram, LinkError, Malformed, SampleDatagram,
+                       SequenceGuard, decode, encode_command, encode_excavator_command, encode_status)
 
 
 def parse_address(url: str) -> tuple[str, int]:
@@ -50,6 +53,8 @@ class RigClient:
         self.seq = int(time.time() * 1000) & 0x3FFFFFFF     # fresh start above old sessions
         self.guard = SequenceGuard()
         self.session = 0          #: the rig's session number, from the first answer
+        self._nonce = 0           # the opening handshake's, until its open is sent
+        self._opens = ()          # the seqs of the opens sent: a late answer to one still serves
         self.dropped = {"malformed": 0, "auth": 0, "stale": 0, "replay": 0}
 
     def _send(self, datagram: bytes) -> None:
@@ -61,14 +66,12 @@ class RigClient:
     def exchange(self, u, t: float, dt: float = 1e-3) -> SampleDatagram | ExcavatorSampleDatagram | None:
         """Send a command (``u`` for the step from ``t`` to ``t + dt``: a number for the
         boom, four for the excavator's valves) or, with ``u=None``, a status request; return the rig's answer, or None when none arrives
-        within the timeout.  The first exchange opens a session (a status request of
-        session 0) before a command can be sent."""
+        within the timeout.  The first exchange opens a session (a hello of a fresh
+        nonce, then the open with the rig's cookie) before a command can be sent."""
         deadline = time.perf_counter() + self.timeout
         if not self.session:
-            self.seq += 1
-            self._send(encode_status(self.seq, t, self.key, 0))
-            opened = self._answer(self.seq, deadline)
-            if opened is None or not opened.session:
+            opened = self._open(t, deadline)
+            if opened is None:
                 return None
             self.session = opened.session
             if u is None:
@@ -83,9 +86,32 @@ class RigClient:
             self._send(encode_excavator_command(seq, t, tuple(u), self.key, dt, self.session))
         return self._answer(seq, deadline)
 
-    def _answer(self, seq: int, deadline: float) -> SampleDatagram | None:
-        """The rig's answer to ``seq`` (authentic, of this session, not a replay), or None
-        at ``deadline``."""
+    def _open(self, t: float, deadline: float):
+        """The handshake (``protocol.py``): a hello, the rig's challenge, the open with its
+        cookie; the rig's answer to the open (with the new session), or None at
+        ``deadline``.  An answer that comes late, a challenge or an open's sample, serves
+        the next attempt."""
+        if not self._nonce:           # one nonce until its open is sent
+            self._nonce = secrets.randbits(64) or 1
+        self.seq += 1
+        self._send(encode_status(self.seq, t, self.key, 0, self._nonce))
+        msg = self._answer(self._opens, deadline, self._nonce)
+        if isinstance(msg, Challenge):
+            self.seq += 1
+            self._send(encode_status(self.seq, t, self.key, 0, self._nonce, msg.cookie))
+            self._nonce = 0           # its cookie is spent: another open needs another hello
+            self._opens = (*self._opens[-7:], self.seq)
+            msg = self._answer(self._opens, deadline)
+        if msg is None or not msg.session:
+            return None
+        self._opens = ()
+        return msg
+
+    def _answer(self, seq, deadline: float, nonce: int | None = None):
+        """The rig's answer to ``seq`` (authentic, of this session, not a replay; ``seq``
+        may be a tuple of them), or None at ``deadline``; with ``nonce``, also the
+        challenge to a hello of that nonce (this one or an earlier one's, late)."""
+        seqs = seq if isinstance(seq, tuple) else (seq,)
         while True:
             remaining = deadline - time.perf_counter()
             if remaining <= 0:
@@ -108,10 +134,18 @@ class RigClient:
             except BadMac:
                 self.dropped["auth"] += 1
                 continue
+            if isinstance(msg, Challenge):
+                if nonce is None or msg.nonce != nonce or not msg.cookie:     # not ours, or late
+                    self.dropped["stale"] += 1
+                    continue
+                if not self.guard.accept(msg.seq):
+                    self.dropped["replay"] += 1
+                    continue
+                return msg
             if not isinstance(msg, (SampleDatagram, ExcavatorSampleDatagram)):
                 self.dropped["malformed"] += 1
                 continue
-            if msg.echo != seq or (self.session and msg.session != self.session):
+            if msg.echo not in seqs or (self.session and msg.session != self.session):
                 self.dropped["stale"] += 1
                 continue
             if not self.guard.accept(msg.seq):

@@ -10,6 +10,13 @@
   latest sample at once;
 * a **status request** is answered with the current sample without stepping.
 
+A lockstep rig keeps each session's clock on its sender's: when the commands of some
+steps were lost (a blackout, a flooded receive buffer), the next command's time says
+so, and the rig first steps through the missed steps with the valve holding its last
+command (or centred, once the watchdog has engaged), then the commanded step (up to
+:data:`MAX_HELD_STEPS`; beyond, one step, and the bridge sees the gap).  So lost
+datagrams never put the rig behind its driver.
+
 The plant is the boom's :class:`~boomfmi.rig.plant.VirtualRig` or the excavator's
 :class:`~boomfmi.rig.excavator.ExcavatorRig`: the latter takes excavator commands (four
 valve voltages) and answers with excavator samples (``link/protocol.py``, kinds 4 and
@@ -17,8 +24,11 @@ valve voltages) and answers with excavator samples (``link/protocol.py``, kinds 
 excavator's recording has its own columns (``rig.excavator.COLUMNS`` and failsafe).
 
 Datagrams that are malformed, fail authentication, belong to no open session or repeat
-an old sequence number of their session (link protocol version 2: replay protection per
-session, whatever port a datagram comes from) are ignored and counted.  **Watchdog**:
+an old sequence number of their session (replay protection per session, whatever port
+a datagram comes from), and opens whose challenge is stale or used (link protocol
+version 3) are ignored and counted; so are the datagrams the kernel dropped because the
+receive buffer was full (``SO_RXQ_OVFL``, Linux).  No unauthenticated datagram opens,
+keeps or evicts a session or steps the rig.  **Watchdog**:
 when no valid command has arrived for ``watchdog`` seconds (50 ms by default, wall
 clock) the rig centres the valve (5 V) and reports the fail-safe state in every sample
 until commands resume.
@@ -38,51 +48,76 @@ import secrets
 import select
 import signal
 import socket
+import sys
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
 
-from ..link.protocol import (FAILSAFE, LOCKSTEP, MAX_SESSIONS, BadMac, Command, ExcavatorCommand, Malformed,
-                             SequenceGuard, StatusRequest, decode, encode_excavator_sample, encode_sample)
+from ..link.protocol import (FAILSAFE, LOCKSTEP, MAX_SESSIONS, SESSION_IDLE, BadMac, Command, ExcavatorCommand,
+                             Malformed, OpenGuard, SequenceGuard, StatusRequest, decode, encode_challenge,
+                             encode_excavator_sample, encode_sample)
 from ..physics import reference_rig
 from ..recording import RecordingWriter
 
 MCL_CURRENT, MCL_FUTURE = 1, 2          # <sys/mman.h> on Linux
 COLUMNS = ("t", "u", "p_a", "p_b", "alpha", "f_ext", "x", "failsafe")
+#: The longest watchdog a rig accepts [s]: beyond, its fail-safe would in effect be off.
+MAX_WATCHDOG = 10.0
+#: A lockstep rig steps through at most this many steps whose commands were lost.
+MAX_HELD_STEPS = 1000
+SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40)        # <asm-generic/socket.h>
 
 
 @dataclass
 class Counters:
     commands: int = 0
     status: int = 0
+    hellos: int = 0                 #: handshakes' hellos (answered with a challenge)
     rejected_malformed: int = 0
     rejected_auth: int = 0
     rejected_replay: int = 0
     rejected_session: int = 0
+    rejected_open: int = 0          #: opens whose challenge is stale, used or not the rig's
+    refused_open: int = 0           #: opens refused because every session was active
+    overflowed: int = 0             #: datagrams the kernel dropped, the receive buffer full
+    held_steps: int = 0             #: lockstep steps taken for lost commands
     failsafe_entries: int = 0
     missed_ticks: int = 0
-    #: session number -> its SequenceGuard, the latest MAX_SESSIONS opened
+    #: session number -> its SequenceGuard, at most MAX_SESSIONS, least recently used first
     sessions: OrderedDict = field(default_factory=OrderedDict)
 
     @property
     def rejected(self) -> int:
-        return self.rejected_malformed + self.rejected_auth + self.rejected_replay + self.rejected_session
+        return (self.rejected_malformed + self.rejected_auth + self.rejected_replay + self.rejected_session
+                + self.rejected_open)
 
     def summary(self) -> str:
-        return (f"{self.commands} commands, {self.status} status requests, {len(self.sessions)} sessions; "
+        return (f"{self.commands} commands, {self.status} status requests, {self.hellos} hellos, "
+                f"{len(self.sessions)} sessions; "
                 f"ignored {self.rejected_malformed} malformed, {self.rejected_auth} unauthenticated, "
-                f"{self.rejected_replay} replayed, {self.rejected_session} of no open session; "
+                f"{self.rejected_replay} replayed, {self.rejected_session} of no open session, "
+                f"{self.rejected_open} stale opens; {self.refused_open} opens refused (every session active); "
+                f"{self.overflowed} lost in a full receive buffer; "
+                f"{self.held_steps} lockstep steps held for lost commands; "
                 f"fail-safe entered {self.failsafe_entries} times; {self.missed_ticks} ticks missed")
 
 
 class RigServer:
     def __init__(self, plant, key: bytes, port: int = 0, host: str = "127.0.0.1",
                  lockstep: bool = False, record=None, watchdog: float = 0.05, dt: float = 1e-3):
+        if not 0.0 < watchdog <= MAX_WATCHDOG:      # also refuses nan
+            raise ValueError(f"watchdog {watchdog!r} s: it must be > 0 and at most {MAX_WATCHDOG:g} s, "
+                             f"or the fail-safe is in effect off")
         self.plant, self.key = plant, key
         self.lockstep, self.watchdog, self.dt = lockstep, watchdog, dt
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind((host, port))
         self.sock.setblocking(False)
+        try:                      # the kernel's count of datagrams dropped on a full buffer
+            self.sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
+            self._ancillary = socket.CMSG_SPACE(4)
+        except (OSError, AttributeError):
+            self._ancillary = 0
         self.port = self.sock.getsockname()[1]
         self.counters = Counters()
         #: an excavator's rig (four valves) rather than the boom's
@@ -90,7 +125,9 @@ class RigServer:
         self.centre = (reference_rig.u_centre,) * len(plant.JOINTS) if self.excavator else reference_rig.u_centre
         self.u_cmd = self.centre
         self.last_command_wall = time.perf_counter()
-        self.last_command_t: dict = {}           # per session: the time of its last command
+        self.last_command_t: dict = {}           # per session: (t, dt) of its last command that stepped
+        self.session_wall: dict = {}             # per session: when it last had a datagram accepted
+        self.opens = OpenGuard()
         self.failsafe = False
         self.seq = 0
         self.sample = plant.measure()
@@ -99,7 +136,11 @@ class RigServer:
             columns = (*EXCAVATOR_COLUMNS, "failsafe")
         else:
             columns = COLUMNS
-        self.writer = RecordingWriter(record, columns) if record else None
+        try:        # locked while the rig runs: a second writer of the file is refused
+            self.writer = RecordingWriter(record, columns) if record else None
+        except BaseException:
+            self.sock.close()
+            raise
         self._stop = False
 
     # -- the plant ---------------------------------------------------------------------------
@@ -123,6 +164,43 @@ class RigServer:
         self.sample = self.plant.step(u, dt or self.dt)
 
     # -- the link ----------------------------------------------------------------------------
+    def _challenge(self, addr, echo: int, nonce: int) -> None:
+        self.seq += 1
+        try:
+            self.sock.sendto(encode_challenge(self.seq, self.sample.t, echo, nonce, self.opens.challenge(nonce),
+                                              self.key), addr)
+        except OSError:
+            pass
+
+    def _open(self) -> int:
+        """A new session, or 0 when all MAX_SESSIONS are in use and none has been idle
+        for SESSION_IDLE (an active session is never evicted)."""
+        c = self.counters
+        if len(c.sessions) >= MAX_SESSIONS:
+            oldest = next(iter(c.sessions))
+            if time.perf_counter() - self.session_wall[oldest] < SESSION_IDLE:
+                c.refused_open += 1
+                return 0
+            del c.sessions[oldest]
+            self.session_wall.pop(oldest, None)
+            self.last_command_t.pop(oldest, None)
+        session = secrets.randbits(32) or 1
+        while session in c.sessions:
+            session = secrets.randbits(32) or 1
+        c.sessions[session] = SequenceGuard()
+        return session
+
+    def _steps(self, session: int, msg) -> tuple[int, int]:
+        """(held, stepped): the steps a lockstep command asks for, those of its session's
+        lost commands first, then its own (0 for a retry of the last one)."""
+        last = self.last_command_t.get(session)
+        if last is None or msg.t < last[0] - 0.5 * msg.dt:       # a first command, or time went back
+            return 0, 1
+        if abs(msg.t - last[0]) <= 0.5 * msg.dt:                 # a retry: already stepped
+            return 0, 0
+        missed = round((msg.t - last[0] - last[1]) / msg.dt)
+        return (missed if 0 < missed <= MAX_HELD_STEPS else 0), 1
+
     def _reply(self, addr, echo: int, session: int) -> None:
         s = self.sample
         self.seq += 1
@@ -152,14 +230,18 @@ class RigServer:
             c.rejected_malformed += 1
             return
         session = msg.session
-        if isinstance(msg, StatusRequest) and session == 0:       # opens a session
-            session = secrets.randbits(32) or 1
-            while session in c.sessions:
-                session = secrets.randbits(32) or 1
-            c.sessions[session] = SequenceGuard()
-            while len(c.sessions) > MAX_SESSIONS:
-                forgotten, _ = c.sessions.popitem(last=False)
-                self.last_command_t.pop(forgotten, None)
+        if isinstance(msg, StatusRequest) and session == 0:
+            if not msg.cookie:                                     # a hello: challenge it, keep nothing
+                c.hellos += 1
+                self._challenge(addr, msg.seq, msg.nonce)
+                return
+            if not self.opens.accept(msg.nonce, msg.cookie):       # a stale or replayed open
+                c.rejected_open += 1
+                return
+            session = self._open()
+            if not session:
+                return
+            self.session_wall[session] = time.perf_counter()
         guard = c.sessions.get(session)
         if guard is None:
             c.rejected_session += 1
@@ -167,28 +249,38 @@ class RigServer:
         if not guard.accept(msg.seq):
             c.rejected_replay += 1
             return
+        c.sessions.move_to_end(session)                            # least recently used first
+        self.session_wall[session] = time.perf_counter()
         if isinstance(msg, StatusRequest):
             c.status += 1
             self._reply(addr, msg.seq, session)
             return
         c.commands += 1
+        held, stepped = self._steps(session, msg) if self.lockstep else (0, 0)
+        for _ in range(held):            # the lost commands' steps: the valve holds its last command
+            self._advance(msg.dt)
+        c.held_steps += held
         if self.excavator:
             self.u_cmd = tuple(min(max(u, reference_rig.u_min), reference_rig.u_max) for u in msg.u)
         else:
             self.u_cmd = min(max(msg.u, reference_rig.u_min), reference_rig.u_max)
         self.last_command_wall = time.perf_counter()
         self.failsafe = False
-        if self.lockstep:
-            last = self.last_command_t.get(session)
-            if last is None or abs(msg.t - last) > 0.5 * msg.dt:     # not a retry of the last one
-                self._advance(msg.dt)
-                self.last_command_t[session] = msg.t
+        if stepped:
+            self._advance(msg.dt)
+            self.last_command_t[session] = (msg.t, msg.dt)
         self._reply(addr, msg.seq, session)
 
     def _drain(self) -> None:
         while True:
             try:
-                data, addr = self.sock.recvfrom(2048)
+                if self._ancillary:
+                    data, ancillary, _, addr = self.sock.recvmsg(2048, self._ancillary)
+                    for level, kind, value in ancillary:
+                        if level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL and len(value) >= 4:
+                            self.counters.overflowed = int.from_bytes(value[:4], sys.byteorder)   # cumulative
+                else:
+                    data, addr = self.sock.recvfrom(2048)
             except (BlockingIOError, InterruptedError):
                 return
             except OSError:

@@ -21,6 +21,8 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2Real, fmi2ValueReference)
 
+from ..names import name_problem
+
 try:
     from fmpy.logging import addLoggerProxy
 except (ImportError, OSError):  # pragma: no cover - fmpy without its native logging proxy
@@ -66,13 +68,20 @@ def model_description(path):
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such FMU")
     try:
-        return read_model_description(str(path))
+        md = read_model_description(str(path))
     except zipfile.BadZipFile:
         raise ValueError(f"{path}: not an FMU (not a zip archive; a truncated or corrupted file?)") from None
     except KeyError as e:
         raise ValueError(f"{path}: not an FMU (no {e.args[0] if e.args else 'modelDescription.xml'} in it)") from None
     except Exception as e:           # fmpy's own parse and validation errors
         raise ValueError(f"{path}: not a valid FMU: {e}") from None
+    for kind in ("coSimulation", "modelExchange"):   # fmpy loads binaries/<platform>/<identifier>.so
+        identifier = getattr(getattr(md, kind, None), "modelIdentifier", None)
+        problem = None if identifier is None else name_problem(identifier)
+        if problem:
+            raise ValueError(f"{path}: not a valid FMU: its {kind} modelIdentifier {identifier!r} is refused "
+                             f"(it names the FMU's library): {problem}")
+    return md
 
 
 class FmuInstance:

@@ -50,6 +50,10 @@ from .ssv import Parameter, SspError, read_ssv
 
 ALGORITHMS = ("gauss-seidel", "jacobi")
 NS_PER_S = 1_000_000_000
+#: The most communication steps one run may have: its rows are held in memory (a boom's
+#: 13 columns take about 1 GB at this bound), and it is 2.8 hours at the 1 ms step, over
+#: twice the longest recording read (``recording.MAX_BYTES``, about an hour at 1 kHz).
+MAX_STEPS = 10_000_000
 
 
 class _Progress:
@@ -117,10 +121,15 @@ class CoSimulation:
         self._ran = False
         self.instances: dict[str, FmuInstance] = {}
         try:
-            for name, comp in self.structure.components.items():
-                fmu_path = Path(self._tmp.name) / f"{name}.fmu"
+            for i, (name, comp) in enumerate(self.structure.components.items()):
+                # the copy's name is its place in the SSD, never the component's name (data
+                # from the file: ssp.read_ssp refuses any that is not a plain name)
+                fmu_path = Path(self._tmp.name) / f"component{i}.fmu"
                 fmu_path.write_bytes(self.structure.read(comp.source))
-                self.instances[name] = FmuInstance(fmu_path, name=name)
+                try:
+                    self.instances[name] = FmuInstance(fmu_path, name=name)
+                except ValueError as e:       # not an FMU: named by its place in the SSP
+                    raise SspError(str(e).replace(str(fmu_path), f"{self.structure.path}:{comp.source}")) from None
             check_against_fmus(self.structure, {n: i.model_description for n, i in self.instances.items()})
             check_shared(self.structure, self.instances)
             self._wire()
@@ -251,10 +260,17 @@ class CoSimulation:
         t_end = s.stop_time if stop_time is None else float(stop_time)
         if t_end is None:
             raise ValueError("no stop time: give one (the SSD has no DefaultExperiment stopTime)")
+        for what, t in (("start", t0), ("stop", t_end)):
+            if not math.isfinite(t):
+                raise ValueError(f"the {what} time must be a finite number of seconds, not {t}")
         t0_ns = int(round(t0 * NS_PER_S))
         n_steps = int(round((t_end - t0) * NS_PER_S / self.step_ns))
         if n_steps < 1:
             raise ValueError(f"stop time {t_end} s leaves no step of {self.step_size} s after {t0} s")
+        if n_steps > MAX_STEPS:
+            raise ValueError(f"stop time {t_end:g} s is {n_steps:.3g} steps of {self.step_size:g} s; a run may have "
+                             f"at most {MAX_STEPS:,} (MAX_STEPS: {MAX_STEPS * self.step_size / 3600:.3g} h at this "
+                             f"step, its rows held in memory): run it in parts")
         source = _input_source(inputs, self.inputs)
 
         by_comp: dict[str, dict] = {n: {} for n in self.instances}

@@ -8,11 +8,13 @@ the FMUs' model descriptions.
 """
 from __future__ import annotations
 
+import math
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
+from ..names import member_problem, name_problem
 from .ssv import NS, Parameter, SspError, parse_parameter_set, read_ssv
 
 SYSTEM = ""   # the element name of the system itself in a connection
@@ -64,6 +66,9 @@ class SystemStructure:
 
 
 def _read_member(path: Path, member: str) -> bytes:
+    problem = member_problem(member)       # a name from the SSD never leaves the SSP
+    if problem:
+        raise SspError(f"{path}: refers to {member!r}: {problem}")
     if path.is_dir():
         f = path / member
         if not f.is_file():
@@ -119,7 +124,16 @@ def read_ssp(path) -> SystemStructure:
     for c in system.findall("ssd:Elements/ssd:Component", NS):
         if c.get("type", "application/x-fmu-sharedlibrary") != "application/x-fmu-sharedlibrary":
             raise SspError(f"{where}: component {c.get('name')} is of type {c.get('type')}, not an FMU")
-        components[c.get("name")] = Component(c.get("name"), c.get("source"), _connectors(c))
+        name, source = c.get("name"), c.get("source")
+        problem = name_problem(name)       # names are data: never a path, never a '.' of valve.A_max
+        if problem:
+            raise SspError(f"{where}: component {name!r} is refused: {problem}")
+        if name in components:
+            raise SspError(f"{where}: two components are named {name!r}: a component's name is unique")
+        problem = member_problem(source)
+        if problem:
+            raise SspError(f"{where}: component {name}: source {source!r} is refused: {problem}")
+        components[name] = Component(name, source, _connectors(c))
     structure = SystemStructure(path=path, name=root.get("name"), components=components,
                                 connectors=_connectors(system), connections=[])
 
@@ -171,6 +185,10 @@ def _apply_bindings(structure: SystemStructure, element, prefix: str, where: str
         full_prefix = prefix + (b.get("prefix") or "")
         source = b.get("source")
         if source:
+            problem = member_problem(source)
+            if problem:
+                raise SspError(f"{where}: the parameter binding of {prefix[:-1] or 'the system'}: "
+                               f"source {source!r} is refused: {problem}")
             params = read_ssv(structure.read(source), f"{structure.path}:{source}")
             origin = source
         else:
@@ -224,7 +242,20 @@ def check_against_fmus(structure: SystemStructure, model_descriptions: dict) -> 
             raise SspError(f"{origin}: parameter {name}: {element}.{var_name} is an {var.causality}, "
                            f"not a parameter")
         if var.type == "Real" and p.type == "Integer":      # an integer is a valid real
-            structure.parameters[name] = p._replace(type="Real", value=float(p.value))
-            continue
+            if abs(p.value) > 1e308:                        # beyond any float
+                raise SspError(f"{origin}: parameter {name} = an integer of {len(str(abs(p.value)))} digits: "
+                               f"must be a finite number")
+            p = structure.parameters[name] = p._replace(type="Real", value=float(p.value))
         if var.type != p.type and not (var.type == "Enumeration" and p.type == "Integer"):
             raise SspError(f"{origin}: parameter {name} is given as {p.type}, the FMU declares {var.type}")
+        if p.type in ("Real", "Integer"):
+            _check_finite(name, float(p.value), origin)
+
+
+def _check_finite(name: str, value: float, origin: str) -> None:
+    """Raise :class:`SspError` unless the value bound to parameter ``name`` is finite: no
+    parameter of the machine is infinite, and the master computes with some of them (the
+    stable step, the view's geometry).  Its range is the FMU's to judge: each checks its
+    declared min and max, with its reasons, when it is initialised."""
+    if not math.isfinite(value):
+        raise SspError(f"{origin}: parameter {name} = {value}: must be a finite number")

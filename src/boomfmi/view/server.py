@@ -284,7 +284,11 @@ def parse_command(data) -> dict:
         v = msg.get(name)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise BadMessage(f"{cmd}: {name} must be a number, not {type(v).__name__}")
-        v = float(v)
+        try:
+            v = float(v)
+        except OverflowError:                     # an integer beyond any float (400 digits)
+            raise BadMessage(f"{cmd}: {name} must be finite, not an integer of "
+                             f"{len(str(abs(v)))} digits") from None
         if not math.isfinite(v):
             raise BadMessage(f"{cmd}: {name} must be finite, not {v}")
         msg[name] = v
