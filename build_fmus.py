@@ -5,7 +5,7 @@
 
 Each FMU is self-contained (its physics bundled under a private name), carries SI
 units, bounds and output dependencies, and passes fmpy.validation.validate_fmu.
-``--fmi 3`` builds the FMI 3.0 versions of the four model FMUs (pythonfmu3, from the
+``--fmi 3`` builds the FMI 3.0 versions of the five model FMUs (valve, cylinder, boom_load, force_estimator, linkage) (pythonfmu3, from the
 same adapters) into build/fmi3/ instead; the SSPs stay FMI 2.0.  The FMUs are lean by
 default (resources/boomfmi_requirements.txt names the Python and numpy they need, checked
 at fmi2Instantiate); ``--portable`` puts numpy inside, for each platform they declare.
@@ -32,7 +32,9 @@ def main(argv=None) -> int:
     parser.add_argument("names", nargs="*", default=list(FMU_NAMES), help="FMUs to build (default: all)")
     parser.add_argument("--out", type=Path, default=HERE / "build", help="output folder (default: build/)")
     parser.add_argument("--write-references", action="store_true",
-                        help="also rewrite fmus/<name>/<name>_in.csv and _ref.csv from the built FMUs")
+                        help="also rewrite fmus/<name>/<name>_in.csv and _ref.csv from the built FMUs (a file "
+                             "unchanged but for floating-point noise is kept), and, with every FMU built, "
+                             "ssp/reference_rig.ssv and docs/interfaces.md")
     parser.add_argument("--portable", action="store_true",
                         help="put numpy (for linux64 and win64) inside each FMU, so that a host needs only a "
                              "CPython of this build's version (about 20 MB more per FMU); default: lean FMUs "
@@ -57,6 +59,11 @@ def main(argv=None) -> int:
         from boomfmi.fmubuild.ssp import fmus_of, pack_ssp, write_reference_parameters
         if set(args.names) == set(FMU_NAMES) and args.write_references:
             print(f"wrote {write_reference_parameters([HERE / 'ssp' / ssd for ssd in SSPS.values()], args.out / 'fmus', HERE / 'ssp' / 'reference_rig.ssv')}")
+            from boomfmi.describe import INTERFACES_DOC, interfaces_document
+            doc, text = HERE / INTERFACES_DOC, interfaces_document([args.out / "fmus" / f"{n}.fmu" for n in FMU_NAMES])
+            if not doc.is_file() or doc.read_text() != text:
+                doc.write_text(text)
+            print(f"wrote {doc}")
         if args.write_references and {"valve", "cylinder", "linkage"} & set(args.names):
             from boomfmi.fmubuild.excavator import excavator_parameters_ssv
             print(f"wrote {excavator_parameters_ssv(HERE / 'ssp' / 'excavator.ssd', args.out / 'fmus', HERE / 'ssp' / 'excavator.ssv')}")

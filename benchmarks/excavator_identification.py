@@ -5,10 +5,17 @@ the excitation drawn from each of ``--seeds``, under each sensor variant of
 ``--sensors``: ``standard`` the rig's own (500 Pa and 0.2 mrad of noise, 12-bit ADCs),
 ``noisy`` twice its noise, ``fine`` a fifth of the angle's and two fifths of the
 pressures' noise and no ADC), the worst error per parameter over the seeds of each
-variant and over all, then the tip force estimate's RMSE per axis as a share of the
-peak on the three contact scenarios of the digging cycle.
+variant and over all, then the tip force estimate on each scenario of
+``experiments.TIP_FORCE_SCENARIOS`` (the digging cycle's three, and the closed-loop dig
+through soft and hard soil and the load cell's push mid-workspace), over the contact
+samples only: the RMSE per axis as a share of the peak force magnitude (target 10 %),
+the estimate's delay, the coverage of its interval (the share of contact samples with
+the true force inside, target 95 %) and its median width per axis against the best
+possible (``excavator_tip_force_bounds.py``'s sets with exact sensors, every
+``--every``-th contact sample).  ``--tip-only`` skips the identification.
 
     .venv/bin/python benchmarks/excavator_identification.py [--seeds 0 1 2] [--sensors standard,noisy,fine]
+        [--tip-only] [--every 5]
 """
 import argparse
 import time
@@ -17,7 +24,7 @@ import numpy as np
 
 from boomfmi import experiments as E
 from boomfmi.identify.excavator import identify_excavator, true_values
-from boomfmi.physics.excavator_force import estimate_tip_force
+from boomfmi.physics.excavator_force import estimate_tip_force, tip_force_figures
 from boomfmi.rig.config import NOISE
 from boomfmi.rig.excavator import run_excavator_offline
 
@@ -39,7 +46,16 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="excitation seeds")
     ap.add_argument("--sensors", default=",".join(SENSORS), help=f"sensor variants, of {', '.join(SENSORS)}")
+    ap.add_argument("--tip-only", action="store_true", help="the tip force's figures only")
+    ap.add_argument("--every", type=int, default=5, help="every n-th contact sample for the best possible width")
+    ap.add_argument("--scenarios", default=",".join(E.TIP_FORCE_SCENARIOS), help="tip force scenarios")
     args = ap.parse_args(argv)
+    if not args.tip_only:
+        identification(args)
+    tip_force(args)
+
+
+def identification(args):
     truth = true_values(payload=PAYLOAD)
     all_worst, all_covered, runs = {}, {}, 0
     for variant in args.sensors.split(","):
@@ -69,18 +85,34 @@ def main(argv=None):
         runs += len(args.seeds)
     print(f"every variant: largest error over {runs} run(s), and how many intervals cover the truth")
     _worst_lines(all_worst, all_covered, runs)
-    print("tip force estimate (per-joint observers, least squares over J^T)")
-    for name in ("prescribed_push", "soft_soil", "hard_soil"):
-        cmd = E.digging_cycle()
-        d = run_excavator_offline({"machine": "excavator", "contact": E.contact(name).config()}, cmd, cmd.duration)
-        f, res = estimate_tip_force(d)
+
+
+def tip_force(args):
+    """The tip force's figures per scenario, contact samples only (standard sensors)."""
+    from excavator_tip_force_bounds import best_bounds
+    print("tip force estimate (per-joint observers, least squares over J^T; its interval of consistent forces), "
+          "contact samples only, standard sensors")
+    for name in args.scenarios.split(","):
+        c, cmd = E.tip_force_scenario(name)
+        d = run_excavator_offline({"machine": "excavator", "contact": c.config()}, cmd, cmd.duration)
+        f, res, lo, hi = estimate_tip_force(d, bounds=True)
         ft = d[["f_tip_x", "f_tip_y", "f_tip_z"]].to_numpy()
-        parts = []
-        for k, c in enumerate("xyz"):
-            rmse = float(np.sqrt(np.mean((f[:, k] - ft[:, k]) ** 2)))
-            peak = float(np.max(np.abs(ft[:, k])))
-            parts.append(f"{c}: RMSE {rmse:.2f} N / peak {peak:.1f} N = {100 * rmse / peak:.0f} %")
-        print(f"  {name:16s} " + "; ".join(parts) + f"; residual median {np.median(res):.2f} N.m")
+        fig = tip_force_figures(d["t"].to_numpy(), ft, f, lo, hi)
+        clipped = tip_force_figures(d["t"].to_numpy(), ft, np.clip(f, lo, hi))
+        _, half, inside, none, _ = best_bounds(name, args.every)
+        lag = " / ".join(f"{1000 * v:.0f}" for v in fig["delay"])
+        print(f"  {name}: {fig['contact_samples']} contact samples, peak magnitude {fig['peak']:.1f} N, delay "
+              f"x / y / z {lag} ms, the true force inside the interval on all axes at "
+              f"{100 * fig['coverage_all']:.1f} %; best possible (exact sensors, every {args.every}-th contact "
+              f"sample): the truth in its set at {inside} of {len(half) + none}")
+        for k, ax in enumerate("xyz"):
+            h = half[:, k]
+            best = float(np.median(2.0 * h)) if len(h) else float("nan")
+            rmse, share, cov, med = fig["rmse"][k], fig["rmse_share"][k], fig["coverage"][k], fig["median_width"][k]
+            print(f"    {ax}: RMSE {rmse:6.2f} N = {100 * share:5.1f} % of the peak magnitude "
+                  f"{'within 10 %' if share <= 0.1 else 'OVER 10 %':11s}; coverage {100 * cov:5.1f} % "
+                  f"{'>= 95 %' if cov >= 0.95 else 'UNDER 95 %':10s}; median width {med:7.2f} N, best possible "
+                  f"{best:7.2f} N; the estimate clipped to its interval: {100 * clipped['rmse_share'][k]:5.1f} %")
 
 
 if __name__ == "__main__":

@@ -1,5 +1,6 @@
-"""What the excavator's recordings can tell of the tip force on the digging cycle's
-contact scenarios: the range of tip forces that exact measurements leave open, per
+"""What the excavator's recordings can tell of the tip force on the contact scenarios
+(``experiments.TIP_FORCE_SCENARIOS``: the digging cycle's and the closed-loop ones): the
+range of tip forces that exact measurements leave open, per
 world axis, and the RMSE below which no estimator can be sure to come.
 
 A joint that sticks feels the tip force only through its static friction, which takes
@@ -19,7 +20,9 @@ axis over that set (two linear programs).  Half that width is the least worst-ca
 of any estimator at that sample: the recording cannot tell the ends apart.  Printed per
 scenario and axis: the share of contact samples where the set is unbounded (a stop
 takes the force), the RMS half-width over the bounded ones, and the share of samples
-where the data pin the axis to within +-10 % of its peak.
+where the data pin the axis to within +-10 % of its peak, and the median width of
+the set where bounded (what ``excavator_identification.py`` sets the estimator's
+interval against).
 
     .venv/bin/python benchmarks/excavator_tip_force_bounds.py [--every 5] [--tol 2]
 """
@@ -33,7 +36,7 @@ from boomfmi.physics import excavator as exc
 from boomfmi.rig.excavator import run_excavator_offline
 
 EXACT = {"p_sigma": 0.0, "alpha_sigma": 0.0, "quantise": False}
-SCENARIOS = ("prescribed_push", "soft_soil", "hard_soil")
+SCENARIOS = tuple(E.TIP_FORCE_SCENARIOS)
 
 
 def feasible_rows(x, v, a, p_a, p_b, ex: exc.Excavator, tol: float, x_stop: float = 1e-6):
@@ -83,35 +86,50 @@ def axis_ranges(A, b):
     return ends[0], ends[1]
 
 
+def best_bounds(name: str, every: int = 5, tol: float = 2.0, ex: exc.Excavator | None = None):
+    """The scenario ``name`` run with exact sensors; at every ``every``-th contact sample
+    the set of tip forces consistent with it.  Returns ``(samples, half, inside, none,
+    peak)``: the samples' indices, the half-widths per axis (m, 3) [N] (``inf`` where
+    unbounded) of those with a set, how many held the true force, how many had no
+    force within ``tol`` [N], and each axis's peak [N]."""
+    ex = exc.Excavator() if ex is None else ex
+    c, cmd = E.tip_force_scenario(name)
+    d = run_excavator_offline({"machine": "excavator", "noise": EXACT, "contact": c.config()}, cmd, cmd.duration)
+    return _sets(d, every, tol, ex)
+
+
+def _sets(d, every, tol, ex):
+    """best_bounds' sets over the exact recording ``d``."""
+    t = d["t"].to_numpy(float)
+    X = d[[f"x_{j}" for j in exc.JOINTS]].to_numpy(float)
+    V = d[[f"v_{j}" for j in exc.JOINTS]].to_numpy(float)
+    Acc = np.gradient(V, t, axis=0)
+    PA = d[[f"p_a_{j}" for j in exc.JOINTS]].to_numpy(float) + ex.P_atm
+    PB = d[[f"p_b_{j}" for j in exc.JOINTS]].to_numpy(float) + ex.P_atm
+    F = d[["f_tip_x", "f_tip_y", "f_tip_z"]].to_numpy(float)
+    peak = np.abs(F).max(axis=0)
+    samples = np.flatnonzero(np.linalg.norm(F, axis=1) > 0.0)[::every]
+    half, none, inside = [], 0, 0
+    for k in samples:
+        A, b = feasible_rows(X[k], V[k], Acc[k], PA[k], PB[k], ex, tol)
+        inside += bool(np.all(A @ F[k] <= b + 1e-9))
+        ranges = axis_ranges(A, b)
+        if ranges is None:
+            none += 1                 # no force fits within --tol (a derivative's error at a start or stop)
+            continue
+        half.append(0.5 * (ranges[1] - ranges[0]))
+    return samples, np.array(half).reshape(-1, 3), inside, none, peak
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--every", type=int, default=5, help="every n-th contact sample")
     ap.add_argument("--tol", type=float, default=2.0, help="[N] on a sliding joint's equation")
+    ap.add_argument("--scenarios", default=",".join(SCENARIOS), help=f"of {', '.join(SCENARIOS)}")
     args = ap.parse_args(argv)
     ex = exc.Excavator()
-    for name in SCENARIOS:
-        cmd = E.digging_cycle()
-        d = run_excavator_offline({"machine": "excavator", "noise": EXACT,
-                                   "contact": E.contact(name).config()}, cmd, cmd.duration)
-        t = d["t"].to_numpy(float)
-        X = d[[f"x_{j}" for j in exc.JOINTS]].to_numpy(float)
-        V = d[[f"v_{j}" for j in exc.JOINTS]].to_numpy(float)
-        Acc = np.gradient(V, t, axis=0)
-        PA = d[[f"p_a_{j}" for j in exc.JOINTS]].to_numpy(float) + ex.P_atm
-        PB = d[[f"p_b_{j}" for j in exc.JOINTS]].to_numpy(float) + ex.P_atm
-        F = d[["f_tip_x", "f_tip_y", "f_tip_z"]].to_numpy(float)
-        peak = np.abs(F).max(axis=0)
-        samples = np.flatnonzero(np.linalg.norm(F, axis=1) > 0.0)[::args.every]
-        half, none, inside = [], 0, 0
-        for k in samples:
-            A, b = feasible_rows(X[k], V[k], Acc[k], PA[k], PB[k], ex, args.tol)
-            inside += bool(np.all(A @ F[k] <= b + 1e-9))
-            ranges = axis_ranges(A, b)
-            if ranges is None:
-                none += 1                 # no force fits within --tol (a derivative's error at a start or stop)
-                continue
-            half.append(0.5 * (ranges[1] - ranges[0]))
-        half = np.array(half)
+    for name in args.scenarios.split(","):
+        samples, half, inside, none, peak = best_bounds(name, args.every, args.tol, ex)
         print(f"{name}: {len(samples)} contact samples (every {args.every}-th), the true force in the set at "
               f"{inside}, {none} with no force within {args.tol:g} N")
         for k, c in enumerate("xyz"):
@@ -119,9 +137,11 @@ def main(argv=None):
             bounded = np.isfinite(h)
             rms = float(np.sqrt(np.mean(h[bounded] ** 2))) if bounded.any() else float("nan")
             pinned = float(np.mean(h <= 0.1 * peak[k]))
+            med = float(np.median(2.0 * h[bounded])) if bounded.any() else float("nan")
             print(f"  {c}: peak {peak[k]:6.1f} N; unbounded {100 * (1 - bounded.mean()):5.1f} % of the samples; "
                   f"RMS half-width where bounded {rms:7.2f} N = {100 * rms / peak[k]:6.1f} % of the peak; "
-                  f"pinned within +-10 % of the peak at {100 * pinned:5.1f} %")
+                  f"pinned within +-10 % of the peak at {100 * pinned:5.1f} %; median width where bounded "
+                  f"{med:7.2f} N")
 
 
 if __name__ == "__main__":

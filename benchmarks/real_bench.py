@@ -11,6 +11,11 @@ of its tests and scored on others it was not fitted on:
   session of its own (the even-pressure files were sampled at about 60 Hz);
 * the others: fitted on the first half of every test's strokes, scored on the second.
 
+Held-out files (``transfer_rows``): every law scored on whole files it was not fitted
+on, leaving one pressure out and one seal design out, beside the within-file floor
+and the error left once the session's constants (F_0, A_eff) are refitted on the
+held-out file: the figures to quote, and how much of them is the session's drift.
+
 ``O-ring_*`` files are byte-identical to ``Circle_*`` and are counted once (as Circle).
 
 Leak-down: every run of the single-run files (``zillen2021-leak`` preset) and every
@@ -29,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import math
 import platform
 import re
 import sys
@@ -115,6 +121,152 @@ def friction_rows(work: Path, n_boot: int):
     return rows
 
 
+# ------------------------------------------------------------------ held-out files
+# leave one seal out fits on the designs of the same bore (A_eff is one per fit)
+def _bore(seal: str) -> float:
+    return AREA_257 if seal.endswith("257") else AREA_25
+
+
+def _sse(fit, d) -> tuple[float, int]:
+    from boomfmi.bench import friction as fb
+    r = d.F - fb.predict(fit, d)
+    return float(r @ r), len(r)
+
+
+def _session_refit(fit, d):
+    """The law with its friction kept and only the session's constants (the load cell's
+    offset F_0 and the effective area A_eff: the pressure sensor's and force sensor's
+    calibration of the day) refitted on ``d``."""
+    from dataclasses import replace
+    from scipy.optimize import least_squares
+    from boomfmi.bench import friction as fb
+    P = fit.params
+
+    def res(q):
+        return d.F - fb.predict(replace(fit, params={**P, "A_eff": q[0], "F_0": q[1]}), d)
+    q = least_squares(res, [P["A_eff"], P["F_0"]], x_scale=[P["A_eff"], 1.0]).x
+    return replace(fit, params={**P, "A_eff": float(q[0]), "F_0": float(q[1])})
+
+
+def _rms(parts) -> float:
+    sse, n = map(sum, zip(*parts))
+    return math.sqrt(sse / n)
+
+
+def transfer_rows(laws=("eq9", "stribeck", "pressure"), only=None):
+    """Every law scored on whole files it never saw, two ways, with what of the error is
+    the session and what the law:
+
+    * leave one pressure out: per seal design, each pressure's files held out in turn,
+      the law fitted on the design's other pressures (its own sessions: each file is one
+      run of the rig);
+    * leave one seal out: each design held out, the law fitted on every other design of
+      the same bore.
+
+    For each held-out file also: ``within``, the law fitted on the file's own first half
+    of the strokes and scored on its second (the floor: the same session, the law's own
+    scatter), and ``session``, the transferred law with only F_0 and A_eff refitted on
+    the file (what is left once the session's offset and calibration are taken out).
+    RMSEs are over every held-out sample [N].  ``only``: the designs to hold out (default
+    every one; the others of their bore are still fitted on)."""
+    from boomfmi.bench import friction as fb
+    opts = read_options("zillen2021")
+    runs = {seal: [(p, fb.load_run(path, opts)) for p, path in sorted(tests)]
+            for seal, tests in sorted(seal_files().items())}
+    held_seals = [seal for seal in runs if only is None or seal in only]
+    within = {}
+    for seal in held_seals:
+        for _, r in runs[seal]:
+            first, second = fb.split_strokes(r)
+            d1, d2 = fb.combine([first]), fb.combine([second])
+            within[r.path] = {law: _sse(fb.fit_law(law, d1, A_fixed=_bore(seal)), d2) for law in laws}
+    rows = []
+    for mode in ("pressure", "seal"):
+        for seal in held_seals:
+            rs = runs[seal]
+            groups = ([[r for p2, r in rs if p2 == p] for p in sorted({p for p, _ in rs})] if mode == "pressure"
+                      else [[r for _, r in rs]])
+            acc = {law: {"held": [], "session": [], "within": []} for law in laws}
+            for held in groups:
+                if mode == "pressure":
+                    train = [r for _, r in rs if all(r is not h for h in held)]
+                else:
+                    train = [r for s2, rs2 in runs.items() if s2 != seal and _bore(s2) == _bore(seal)
+                             for _, r in rs2]
+                d_fit = fb.combine(train)
+                for law in laws:
+                    fit = fb.fit_law(law, d_fit)
+                    for h in held:
+                        d_h = fb.combine([h])
+                        acc[law]["held"].append(_sse(fit, d_h))
+                        acc[law]["session"].append(_sse(_session_refit(fit, d_h), d_h))
+                        acc[law]["within"].append(within[h.path][law])
+            row = {"mode": mode, "seal": seal, "files": sum(len(g) for g in groups),
+                   "pressures": sorted({p for p, _ in rs}),
+                   "rmse": {law: {k: _rms(v) for k, v in a.items()} for law, a in acc.items()}}
+            rows.append(row)
+            P = row["rmse"]["pressure"]
+            print(f"held-out files, leave one {mode} out, {seal}: pressure law {P['held']:.2f} N "
+                  f"(session constants refitted {P['session']:.2f} N; within-file floor {P['within']:.2f} N)",
+                  flush=True)
+    return rows
+
+
+def held_out_section(tr, fr) -> list[str]:
+    """docs/real-data.md's lines on the laws scored on whole files of other sessions."""
+    if not tr:
+        return []
+    L = ["### On files of other sessions: the figures to quote", "",
+         "Every file is one session of the rig (mounted, pressurised, zeroed, run). A law fitted on some "
+         "files and scored on a whole file it never saw is what a user of the law gets on another day: "
+         "**leave one pressure out** (per design, each pressure's files held out in turn, the law fitted on "
+         "the design's other pressures; 1 and 7 bar held out are extrapolations) and **leave one seal out** "
+         "(each design held out, the law fitted on all other designs of the same bore). Beside each: the "
+         "same transferred law with only the session's constants refitted on the held-out file (the load "
+         "cell's offset F_0 and the effective area A_eff: the day's zero and calibration), and the "
+         "within-file floor (the law fitted on the file's own first half of the strokes, scored on its "
+         "second). Held-out RMSE squared = session part + law part: the session's share is "
+         "(held^2 - refitted^2) / held^2 of the mean squared error; what remains above the floor is the "
+         "law's own transfer error. RMSE [N] over every held-out sample:", "",
+         "| seal design | pressures [bar] | one pressure out: eq9 / stribeck / pressure | pressure law, "
+         "F_0 and A_eff refitted | within-file floor | share in F_0 + p A_eff | one seal out: pressure law | "
+         "F_0 and A_eff refitted | share in F_0 + p A_eff |",
+         "|---|---|---|---|---|---|---|---|---|"]
+    share = lambda r: (r["held"] ** 2 - r["session"] ** 2) / r["held"] ** 2   # noqa: E731
+    by = {(r["mode"], r["seal"]): r for r in tr}
+    seals = sorted({r["seal"] for r in tr})
+    for seal in seals:
+        a, b = by[("pressure", seal)], by[("seal", seal)]
+        A, B = a["rmse"], b["rmse"]
+        L.append(f"| {seal} | {', '.join(f'{p:g}' for p in a['pressures'])} | {A['eq9']['held']:.2f} / "
+                 f"{A['stribeck']['held']:.2f} / **{A['pressure']['held']:.2f}** | {A['pressure']['session']:.2f} | "
+                 f"{A['pressure']['within']:.2f} | {100 * share(A['pressure']):.0f} % | "
+                 f"{B['pressure']['held']:.2f} | {B['pressure']['session']:.2f} | {100 * share(B['pressure']):.0f} % |")
+    lopo = np.array([by[("pressure", s)]["rmse"]["pressure"]["held"] for s in seals])
+    floor = np.array([by[("pressure", s)]["rmse"]["pressure"]["within"] for s in seals])
+    sess = np.array([by[("pressure", s)]["rmse"]["pressure"]["session"] for s in seals])
+    loso = np.array([by[("seal", s)]["rmse"]["pressure"]["held"] for s in seals])
+    loso_s = np.array([by[("seal", s)]["rmse"]["pressure"]["session"] for s in seals])
+    sh = (lopo ** 2 - sess ** 2) / lopo ** 2
+    L += ["", f"Leave one pressure out, the pressure law's error on another session's file is "
+          f"{np.median(lopo / floor):.2f} times the within-file floor (median over the designs; "
+          f"{(lopo / floor).min():.2f} to {(lopo / floor).max():.2f}); of its mean squared error "
+          f"{100 * np.median(sh):.0f} % (median; {100 * sh.min():.0f} to {100 * sh.max():.0f} %) is the "
+          f"session's offset and calibration, which a zero and an area check on the day remove: refitted, "
+          f"the error is {np.median(sess / floor):.2f} times the floor, so the law itself transfers across "
+          f"pressures. (The refit takes out whatever acts alike in both directions, F_0 + p A_eff: the "
+          f"session's drift, and any error of the law's that looks like it; the friction, which changes "
+          f"sign with the direction, it leaves to the law.) Leave one seal out, a law from the other designs "
+          f"misses by {np.median(loso):.1f} N (median), {np.median(loso_s):.1f} N once F_0 and A_eff are "
+          f"refitted: the designs differ mostly in what acts alike both ways (their effective area, "
+          f"A_eff / A from {min(r['A_ratio'] for r in fr):.3f} to {max(r['A_ratio'] for r in fr):.3f} in the "
+          f"table below at {AREA_25 * 1e5:.0f} N/bar of nominal area, and the day's zero), which a new seal's "
+          f"own zero and area check gives; the friction carried over from the other designs is then "
+          f"{np.median(loso_s / floor):.2f} times the floor (median; {(loso_s / floor).min():.2f} to "
+          f"{(loso_s / floor).max():.2f}).", ""]
+    return L
+
+
 def leak_runs():
     """(label, path, read options, p_start) of every leak-down run, and the repeat
     files' columns left out as copies of an earlier one (label, its original)."""
@@ -165,7 +317,7 @@ def fmt_ci(lo, hi, digits=2):
     return f"[{lo:.{digits}f}, {hi:.{digits}f}]"
 
 
-def write_doc(out: Path, fr, lk, copies, n_boot: int) -> None:
+def write_doc(out: Path, fr, lk, copies, n_boot: int, tr=()) -> None:
     L = ["# Real data: a cylinder's friction and leak-down tests", "",
          f"Made by `python benchmarks/real_bench.py` on {platform.machine()} / Python {platform.python_version()}, "
          f"{n_boot} bootstrap replicates. Data: `../shared/realdata/cylinder-friction-leak/` (CC0; "
@@ -184,7 +336,12 @@ def write_doc(out: Path, fr, lk, copies, n_boot: int) -> None:
          "A law is chosen over a simpler one only where it lowers the holdout's mean squared error with a "
          "95 % interval (bootstrap over the holdout strokes) above zero. Intervals: wild cluster bootstrap "
          "(clusters: the FIT files), 95 %.", "",
-         "Holdout RMSE of the rod force (every holdout sample, reversals included), the chosen law, and the "
+         *held_out_section(tr, fr),
+         "### Within the same files: the choice of law", "",
+         "Holdout RMSE of the rod force (every holdout sample, reversals included) as the law is chosen: for "
+         "most designs on the second half of the strokes of the same files it was fitted on (the same "
+         "session: **within-file** figures; on other sessions' files, see above), for designs "
+         "tested at five or more pressures on the even pressures' files; the chosen law, and the "
          "pressure law's Coulomb coefficient c_d with its 95 % interval:", "",
          "| seal design | fit / holdout | RMSE eq9 [N] | RMSE stribeck [N] | RMSE pressure [N] | chosen | "
          "c_d [N/bar] | F_d0 [N] | F_d(7 bar) / F_d(1 bar) | A_eff / A |",
@@ -280,8 +437,9 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work or Path(tmp)
         fr = friction_rows(work, args.n_boot)
+        tr = transfer_rows()
         lk, copies = leak_rows(work)
-        write_doc(args.out, fr, lk, copies, args.n_boot)
+        write_doc(args.out, fr, lk, copies, args.n_boot, tr)
     print(f"wrote {args.out}")
     return 0
 

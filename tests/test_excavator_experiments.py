@@ -151,7 +151,7 @@ def test_the_prescribed_force_is_known_whatever_the_tip_does():
     assert push.config() == {"type": "prescribed", "force": [-15.0, 5.0, 25.0], "start": 3.5, "stop": 7.5,
                              "ramp": 0.5}
     assert contact("hard_soil").config()["stiffness"] == 15000.0
-    assert set(CONTACTS) == {"soft_soil", "hard_soil", "prescribed_push"}
+    assert set(CONTACTS) == {"soft_soil", "hard_soil", "prescribed_push", "mid_push"}     # mid_push: issue 33
 
 
 @pytest.mark.parametrize("kwargs, message", [

@@ -25,6 +25,15 @@ on its stop, x and y are not determined wherever the upper structure is turned).
 ``tau_est``) where ``determined_*`` is true; where it is false (the physics' ``nan``,
 which an FMI output cannot carry) it holds its last determined value, 0 before the
 first.  A host reads ``f_det_*`` only together with ``determined_*``.
+
+Bounds where the machine cannot tell: ``f_tip_lo_x/y/z`` and ``f_tip_hi_x/y/z``, per
+world axis the smallest and largest tip force consistent with the recording within its
+noise (``observer_step``'s ``state["f_lo"]``, ``state["f_hi"]``: a sliding joint's
+equation within its tolerance ``band_slide`` and ``band_rate``, a sticking joint's
+friction band, one side open for a joint on a stop; the union over the last
+``t_hold``).  An FMI Real cannot be infinite: a side the recording leaves open reads
+``-f_bound`` or ``+f_bound`` exactly (the declared box), so a host treats
+``f_tip_lo_* <= -f_bound`` and ``f_tip_hi_* >= f_bound`` as unbounded.
 """
 import math
 from dataclasses import replace
@@ -35,7 +44,8 @@ import numpy as np
 from boomfmi_excavator_force_estimator_lib.fmislave import BoomSlave, input, output, parameter
 from boomfmi_excavator_force_estimator_lib.physics import reference_rig
 from boomfmi_excavator_force_estimator_lib.physics.excavator import JOINTS, Excavator, check_excavator
-from boomfmi_excavator_force_estimator_lib.physics.excavator_force import (F_MOTION, F_MOTION_SWING, observer_start,
+from boomfmi_excavator_force_estimator_lib.physics.excavator_force import (BAND_RATE, BAND_SLIDE, F_BOUND, F_MOTION,
+                                                                           F_MOTION_SWING, T_HOLD, observer_start,
                                                                            observer_step, reflected_force_3d)
 from boomfmi_excavator_force_estimator_lib.physics.validation import require_non_negative, require_positive
 
@@ -78,6 +88,10 @@ class ExcavatorForceEstimator(BoomSlave):
                  type="Boolean") for c in _AXES),
         *(output(f"f_det_{c}", 0.0, "N", f"tip force, world {c}, from the informative joints alone where "
                  f"determined_{c}; else held at its last determined value (0 before the first)") for c in _AXES),
+        *(output(f"f_tip_lo_{c}", -F_BOUND, "N", f"smallest tip force, world {c}, consistent with the recording "
+                 f"within its noise; -f_bound: unbounded below") for c in _AXES),
+        *(output(f"f_tip_hi_{c}", F_BOUND, "N", f"largest tip force, world {c}, consistent with the recording "
+                 f"within its noise; +f_bound: unbounded above") for c in _AXES),
         *(v for j in JOINTS for v in _friction(j)),
         parameter("payload", 0.0, "kg", "payload in the bucket (identified)", min=0.0),
         parameter("P_atm", reference_rig.P_atm, "Pa", "atmospheric pressure (gauge to absolute)", min=0.0),
@@ -92,6 +106,13 @@ class ExcavatorForceEstimator(BoomSlave):
                   min=0.0),
         parameter("f_info", 3.0, "Hz", "corner frequency of the slower filter of the angles that tells sliding joints",
                   min=0.0),
+        parameter("band_slide", BAND_SLIDE, "1", "tolerance of a sliding joint's equation in the bounds, as a share "
+                  "of its static friction", min=0.0),
+        parameter("band_rate", BAND_RATE, "1", "the bounds' tolerance's share of the filtered pneumatic force's "
+                  "change over the filter's delay", min=0.0),
+        parameter("f_bound", F_BOUND, "N", "the bounds' box: a side at -+f_bound is unbounded by the recording",
+                  min=0.0),
+        parameter("t_hold", T_HOLD, "s", "the bounds reported are the union over this long a window", min=0.0),
         parameter("gain", 0.05, "1", "joystick force per estimated force", min=0.0),
         parameter("f_max", 20.0, "N", "joystick force saturation, per axis", min=0.0),
         parameter("rate_max", 500.0, "N/s", "joystick force rate limit, per axis", min=0.0),
@@ -108,12 +129,15 @@ class ExcavatorForceEstimator(BoomSlave):
         self._r = np.zeros(3)
         self._res = 0.0
         self._f_det = np.zeros(3)
+        bound = float(getattr(self, "f_bound", F_BOUND))
+        self._lo, self._hi = np.full(3, -bound), np.full(3, bound)
         self._state = None
 
     def setup(self):
-        for name in ("payload", "tau_est", "rest_weight", "stop_weight", "gain", "v_info"):
+        for name in ("payload", "tau_est", "rest_weight", "stop_weight", "gain", "v_info", "band_slide", "band_rate",
+                     "t_hold"):
             require_non_negative(name, getattr(self, name))
-        for name in ("f_motion", "f_motion_swing", "f_info", "f_max", "rate_max", "P_atm"):
+        for name in ("f_motion", "f_motion_swing", "f_info", "f_max", "rate_max", "P_atm", "f_bound"):
             require_positive(name, getattr(self, name))
         acts = {j: replace(getattr(_EX, j), K_v=getattr(self, f"K_v_{j}"), F_s=getattr(self, f"F_s_{j}"),
                            F_d=getattr(self, f"F_d_{j}")) for j in JOINTS}
@@ -123,7 +147,9 @@ class ExcavatorForceEstimator(BoomSlave):
         omega = 2.0 * math.pi * np.array([self.f_motion_swing] + [self.f_motion] * 3)     # swing, boom, arm, bucket
         self._observe = partial(observer_step, omega=omega, ex=ex, payload=self.payload,
                                 tau_est=self.tau_est, rest_weight=self.rest_weight,
-                                stop_weight=self.stop_weight, v_info=self.v_info, f_info=self.f_info)
+                                stop_weight=self.stop_weight, v_info=self.v_info, f_info=self.f_info,
+                                band_slide=self.band_slide, band_rate=self.band_rate, f_bound=self.f_bound,
+                                t_hold=self.t_hold)
         self._reset()
 
     def step(self, t, dt):
@@ -136,6 +162,7 @@ class ExcavatorForceEstimator(BoomSlave):
         self._r = reflected_force_3d(self._f, self._r, dt, self.gain, self.f_max, self.rate_max)
         known = self._state["f_known"]
         self._f_det = np.where(np.isfinite(known), known, self._f_det)     # held where undetermined
+        self._lo, self._hi = self._state["f_lo"], self._state["f_hi"]
 
 
 def _determined(self, i: int) -> bool:
@@ -152,3 +179,5 @@ for _i, _c in enumerate(_AXES):
     setattr(ExcavatorForceEstimator, f"f_reflect_{_c}", property(lambda self, i=_i: float(self._r[i])))
     setattr(ExcavatorForceEstimator, f"determined_{_c}", property(lambda self, i=_i: _determined(self, i)))
     setattr(ExcavatorForceEstimator, f"f_det_{_c}", property(lambda self, i=_i: float(self._f_det[i])))
+    setattr(ExcavatorForceEstimator, f"f_tip_lo_{_c}", property(lambda self, i=_i: float(self._lo[i])))
+    setattr(ExcavatorForceEstimator, f"f_tip_hi_{_c}", property(lambda self, i=_i: float(self._hi[i])))

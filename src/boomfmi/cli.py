@@ -11,6 +11,9 @@
                                         (the boom's recordings, or the whole excavator's: per joint)
     boomfmi campaign MANIFEST.csv --out DIR [--scheduler ADDRESS] [--workers N]
     boomfmi fleet --machines 8 --weeks 6 --out DIR   a virtual fleet's recordings and manifest
+    boomfmi view --replay RUN.csv [--model params.json [--write-run RUN.csv]] [--export OUT.mp4 [--start S]
+                 [--history S]] | --live udp://HOST:PORT
+                                        (--model: the excavator's identified machine beside its recording)
     boomfmi describe FMU [FMU ...]      the FMUs' interfaces as Markdown tables
     boomfmi recording import FILE --map "t=1:ms,u=2:V,..." [--delimiter D] [--skip-rows N] --out run.csv
     boomfmi bench friction FIT... (--holdout HOLD... | --split-strokes) --area A --out DIR [map options]
@@ -43,6 +46,10 @@ def _check(args) -> int:
     from .system.instance import model_description, run_table
     if not Path(args.fmu_dir).is_dir():
         raise ValueError(f"{args.fmu_dir}: no such folder")
+    from .paths import references_dir
+    references = Path(args.references) if args.references is not None else references_dir()
+    if not references.is_dir():
+        raise ValueError(f"--references {references}: no such folder")
     fmus = sorted(Path(args.fmu_dir).glob("*.fmu"))
     if not fmus:
         raise ValueError(f"{args.fmu_dir}: no .fmu files to check")
@@ -57,7 +64,7 @@ def _check(args) -> int:
             continue
         problems = validate_fmu(str(fmu))
         status = "valid" if not problems else "INVALID: " + "; ".join(problems)
-        ref_dir = Path(args.references) / fmu.stem
+        ref_dir = references / fmu.stem
         in_csv, ref_csv = ref_dir / f"{fmu.stem}_in.csv", ref_dir / f"{fmu.stem}_ref.csv"
         if in_csv.is_file() and ref_csv.is_file():
             got = run_table(fmu, pd.read_csv(in_csv))
@@ -178,12 +185,38 @@ def _view_key(key_file, option: str, what: str) -> bytes:
 def _view(args) -> int:
     if args.key_file and not args.live:
         raise ValueError("--key-file checks the --live stream: give --live udp://HOST:PORT")
+    if args.history is not None and not args.export:
+        raise ValueError("--history is the plots' past before --start in an --export video: give --export too")
+    if args.write_run and not args.model:
+        raise ValueError("--write-run writes the run file of --replay's recording with the identified machine: "
+                         "give --model params.json too")
+    if args.model:
+        if not args.replay:
+            raise ValueError("--model simulates the identified machine on a recording: give --replay "
+                             "RECORDING.csv (the excavator's)")
+        import tempfile
+        from .identify.excavator_outputs import write_excavator_run
+        with tempfile.TemporaryDirectory(prefix="boomfmi-run-") as tmp:
+            out = args.write_run or Path(tmp) / f"{args.replay.stem}_run.csv"
+            run = write_excavator_run(args.replay, args.model, out, progress=_progress("view"))
+            if args.write_run:
+                print(f"wrote {run}: the machine identified in {args.model} beside {args.replay}, "
+                      f"f_tip_est and its interval")
+                if not args.export:
+                    return 0
+            args.replay = run
+            return _view_run(args)
+    return _view_run(args)
+
+
+def _view_run(args) -> int:
+    """``view`` on a run file (``--replay``) or live: the page, or with ``--export`` a video."""
     if args.export:
         if not args.replay:
             raise ValueError("--export renders a run file: give --replay RUN.csv")
         from .view.export import export
         path, n = export(args.replay, args.export, fps=args.fps, start=args.start, stop=args.stop,
-                         size=args.size)
+                         size=args.size, history=args.history)
         print(f"wrote {path}: {n} frames at {args.fps:g} per second")
         return 0
     from .view.server import serve
@@ -237,6 +270,7 @@ def _identify(args) -> int:
     if common_kind([*args.recordings, *args.holdout]) == "excavator":
         return _identify_excavator(args)
     from .identify import identify_recordings, write_outputs
+    from .identify.preprocess import ABS_FLOOR, NOISE_FACTOR
     result, recs, _ = identify_recordings(args.recordings, args.method, args.a_max, args.cutoff, args.eq13)
     doc = write_outputs(result, recs, args.out, args.holdout)
     print(f"{result.method}: " + ", ".join(
@@ -246,6 +280,14 @@ def _identify(args) -> int:
         print(f"warning: {w}")
     for path, err in doc.get("nrmse_holdout", {}).items():
         print(f"holdout {path}: NRMSE x {100 * err['x']:.2f} %, p_a {100 * err['p_a']:.2f} %, p_b {100 * err['p_b']:.2f} %")
+        gap = doc["holdout_gap"][path]
+        floor = (f"{100 * gap['threshold']:.2f} % ({NOISE_FACTOR:g} times the recording's noise floor, "
+                 f"{100 * gap['noise_floor_sum']:.2f} %, plus {100 * ABS_FLOOR:g} %)")
+        if gap["beyond_noise"]:
+            print(f"  large: {100 * gap['nrmse_sum']:.2f} % in all, beyond {floor}; the model misses an effect: "
+                  f"`boomfmi diagnose {' '.join(str(p) for p in args.recordings)} --holdout {path} --out DIR` names it")
+        else:
+            print(f"  within the noise: {100 * gap['nrmse_sum']:.2f} % in all, under {floor}")
     print("wrote " + ", ".join(doc["written"]))
     return 0
 
@@ -484,8 +526,9 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--key-file", help="file holding the shared link key (default: $BOOMFMI_LINK_KEY)")
     p.add_argument("--fmu", type=Path, default=None,
-                   help="the bridge FMU (default: build/fmus/hardware_bridge.fmu; for an excavator experiment "
-                        "such as digging_cycle, build/fmus/excavator_bridge.fmu)")
+                   help="the bridge FMU (default: the checkout's build/fmus/hardware_bridge.fmu, or under "
+                        "$BOOMFMI_BUILD, from any working directory; for an excavator experiment such as "
+                        "digging_cycle, build/fmus/excavator_bridge.fmu)")
     p.add_argument("--step", type=float, default=1e-3)
     p.add_argument("--stop", type=float, default=None)
     p.add_argument("--timeout", type=float, default=0.05, help="longest wait for the rig's answer per step [s]")
@@ -556,6 +599,16 @@ def main(argv=None) -> int:
     p.add_argument("--start", type=float, default=None, help="--export: from this time [s]")
     p.add_argument("--stop", type=float, default=None, help="--export: to this time [s]")
     p.add_argument("--size", default="1280x720", help="--export: WIDTHxHEIGHT in pixels (default 1280x720)")
+    p.add_argument("--history", type=float, default=None, metavar="SECONDS",
+                   help="--export: the plots' past before --start, as the page shows it (default: the plots' "
+                        "10 s window; 0: none)")
+    p.add_argument("--model", type=Path, metavar="params.json",
+                   help="with --replay RECORDING.csv (the excavator's): simulate the machine `boomfmi identify` "
+                        "wrote there on the recording's commands, beside the machine, with the estimated tip "
+                        "force f_tip_est and its interval, and view (or --export) that run")
+    p.add_argument("--write-run", type=Path, metavar="RUN.csv",
+                   help="with --model: write that run file here (then stop, unless --export) for a later "
+                        "`boomfmi view --replay RUN.csv`")
     p.set_defaults(run=_view)
 
     p = sub.add_parser("recording", help="recordings: import a foreign measurement file")
@@ -597,8 +650,9 @@ def main(argv=None) -> int:
     p.set_defaults(run=_describe)
     p = sub.add_parser("check", help="validate FMUs and replay their reference results")
     p.add_argument("fmu_dir", type=Path)
-    p.add_argument("--references", type=Path, default=Path("fmus"),
-                   help="folder with <name>/<name>_in.csv and _ref.csv (default: fmus)")
+    p.add_argument("--references", type=Path, default=None,
+                   help="folder with <name>/<name>_in.csv and _ref.csv (default: the checkout's fmus/, "
+                        "whatever the working directory)")
     p.set_defaults(run=_check)
     args = parser.parse_args(argv)
     try:

@@ -75,6 +75,33 @@ def held(segments) -> Callable[[float], dict]:
     return profile
 
 
+def slow_ramps(seed: int = 0, duration: float = 12.0, depth=(0.4, 1.6), hold=(0.0, 0.0),
+               step: float | None = None) -> Callable[[float], dict]:
+    """Slow triangles of the command around the centre, the way an operator eases a boom:
+    alternately each side, ``depth`` [V] from 5 V (drawn per triangle), 0.4 to 1.25 s
+    each way, the peak held for ``hold`` [s] (drawn; (0, 0): none).  ``step`` [s]: the
+    command as a staircase of that period (a joystick sampled by a controller); None:
+    continuous."""
+    rng = np.random.default_rng(seed)
+    knots_t, knots_u, t, side = [0.0], [5.0], 0.0, 1.0
+    while t < duration:
+        side = -side
+        peak = 5.0 + side * float(rng.uniform(*depth))
+        for dt_, u in ((rng.uniform(0.4, 1.25), peak), (rng.uniform(*hold), peak), (rng.uniform(0.4, 1.25), 5.0)):
+            t += float(dt_)
+            knots_t.append(t)
+            knots_u.append(u)
+
+    def profile(t: float) -> dict:
+        if step:
+            t = math.floor(t / step) * step
+        return {"u": float(np.interp(t, knots_t, knots_u))}
+    profile.duration = duration
+    profile.breakpoints = ([float(s) for s in np.arange(step, duration, step)] if step else
+                           [k for k in knots_t[1:] if k < duration])
+    return profile
+
+
 def manoeuvres(seed: int = 0, duration: float = 12.0) -> Callable[[float], dict]:
     """An operator's ordinary manoeuvres, drawn from ``seed``: runs into both stroke
     ends, large (1.5 to 4.5 V from centre) and small (0.5 to 1.5 V) openings both ways,
@@ -434,6 +461,9 @@ CONTACTS = {
                                     friction=0.5),
     "prescribed_push": lambda: TipContact("prescribed_push", "prescribed", force=(-15.0, 5.0, 25.0),
                                           start=3.5, stop=7.5, ramp=0.5),
+    # a load cell's push on the tip held mid-workspace (:func:`closed_loop_hold`)
+    "mid_push": lambda: TipContact("mid_push", "prescribed", force=(-15.0, 5.0, 25.0), start=2.0, stop=8.5,
+                                   ramp=0.5),
 }
 
 
@@ -442,6 +472,157 @@ def contact(name: str) -> TipContact:
     if name not in CONTACTS:
         raise ValueError(f"unknown contact scenario {name!r}; known: {', '.join(CONTACTS)}")
     return CONTACTS[name]()
+
+
+# -- closed-loop experiments: an operator (or an automatic bucket controller) on the angles ----
+class JointTrajectoryController:
+    """A joint controller that is part of the experiment, as an operator or an automatic
+    bucket controller is (not part of any estimator): per joint a PI on the measured
+    joint angle against a trajectory in joint space, with damping on the angle's rate,
+    its output the valve command ``u = 5 - (kp e + ki int e - kd w)`` [V] clipped to
+    0 .. 10 V, ``e = q_ref - q`` [rad], ``w`` [rad/s] the measured angle's rate through
+    a first-order filter of ``tau_d`` [s] (the angle sensor's steps are not motion)
+    (a command below the centre extends the cylinder, which raises every joint's angle
+    of the linkage).  ``waypoints``: ``[(t [s], (swing, boom, arm, bucket) [rad]), ...]``
+    from t = 0, joined linearly (the joints keep moving through a waypoint unless their
+    direction turns there); after the last the reference holds.  ``kp`` [V/rad] and
+    ``ki`` [V/(rad s)], ``kd`` [V s/rad] per joint or one for all; the integral term is held within
+    +-``i_max`` [V] (no wind-up against the ground).
+
+    Call it as ``controller(t, angles)`` with the sample measured at ``t``, in time order
+    (:func:`boomfmi.rig.excavator.run_excavator_offline` does, for a profile whose
+    ``closed_loop`` is true); called without ``angles`` (an open-loop runner: the rig
+    server, the hardware bridge, an SSP's simulation) it raises ValueError rather than
+    hold the valves at the centre unseen.  :meth:`reset` restarts the integrators."""
+
+    closed_loop = True
+
+    def __init__(self, waypoints, duration: float | None = None, kp=30.0, ki=60.0, kd=0.0, i_max: float = 2.0,
+                 tau_d: float = 0.03):
+        pts = [(float(t), tuple(float(a) for a in q)) for t, q in waypoints]
+        if len(pts) < 2:
+            raise ValueError("a trajectory needs at least two waypoints")
+        if pts[0][0] != 0.0:
+            raise ValueError(f"the trajectory's first waypoint is at t = 0 s, not {pts[0][0]!r}")
+        for (t0, _), (t1, q) in zip(pts, pts[1:]):
+            if not t1 > t0:
+                raise ValueError(f"waypoint times must increase: {t1!r} s after {t0!r} s")
+        for t, q in pts:
+            if len(q) != len(JOINTS) or not all(math.isfinite(a) for a in q):
+                raise ValueError(f"the waypoint at {t!r} s needs {len(JOINTS)} finite angles [rad] "
+                                 f"({', '.join(JOINTS)}), not {q!r}")
+        self.times = np.array([t for t, _ in pts])
+        self.angles = np.array([q for _, q in pts])
+        self.kp = np.broadcast_to(np.asarray(kp, float), (len(JOINTS),)).copy()
+        self.ki = np.broadcast_to(np.asarray(ki, float), (len(JOINTS),)).copy()
+        self.kd = np.broadcast_to(np.asarray(kd, float), (len(JOINTS),)).copy()
+        if np.any(self.kp < 0) or np.any(self.ki < 0) or np.any(self.kd < 0) or not i_max >= 0:
+            raise ValueError("the controller's gains and i_max must be >= 0")
+        if not tau_d > 0:
+            raise ValueError(f"tau_d must be > 0 s, not {tau_d!r}")
+        self.tau_d = float(tau_d)
+        self.i_max = float(i_max)
+        self.duration = float(self.times[-1] if duration is None else duration)
+        self.breakpoints = [float(t) for t in self.times[1:] if t < self.duration]
+        self.reset()
+
+    def reset(self) -> None:
+        self._integral = np.zeros(len(JOINTS))
+        self._t = None
+        self._q = None
+        self._rate = np.zeros(len(JOINTS))
+
+    def reference(self, t: float) -> np.ndarray:
+        """The trajectory's joint angles [rad] at ``t`` [s]."""
+        return np.array([np.interp(t, self.times, self.angles[:, i]) for i in range(len(JOINTS))])
+
+    def __call__(self, t: float, angles=None) -> dict:
+        if angles is None:
+            raise ValueError("a closed-loop profile needs the measured joint angles at each call, "
+                             "command(t, angles): run it with boomfmi.rig.excavator.run_excavator_offline")
+        q = np.asarray(angles, float)
+        e = self.reference(t) - q
+        if self._t is not None and t > self._t:
+            dt = t - self._t
+            self._integral = np.clip(self._integral + self.ki * e * dt, -self.i_max, self.i_max)
+            self._rate += (dt / (self.tau_d + dt)) * ((q - self._q) / dt - self._rate)
+        self._t, self._q = t, q
+        u = np.clip(CENTRE - (self.kp * e + self._integral - self.kd * self._rate), 0.0, 10.0)
+        return {f"u_{j}": float(c) for j, c in zip(JOINTS, u)}
+
+
+#: The operator's gains (kp [V/rad], ki [V/(rad s)], kd [V s/rad]) per joint (swing,
+#: boom, arm, bucket): the upper structure's inertia on the swing's short crank wants a
+#: softer, damped loop (with the boom's gains and no damping it swings through its
+#: reference by 0.2 rad onto its stop).
+OPERATOR_GAINS = ((6.0, 12.0, 12.0, 12.0), (4.0, 12.0, 12.0, 12.0), (1.5, 0.3, 0.3, 0.3))
+#: The closed-loop dig's trajectory (swing, boom, arm, bucket [rad]; the machine starts
+#: at mid-stroke, (0, 0.85, 1.50, 1.05)): turn to the trench while the boom lowers the
+#: bucket to the ground plane, then drag the bucket through the soil, the arm pulling
+#: in and the bucket curling while the boom's reference holds the tip 2 to 3 cm below
+#: the surface and the upper structure keeps turning slowly (a trench along the swing's
+#: arc), then lift and turn back.  The swing's reference stays within -0.15 .. +0.15 rad
+#: of its +-0.43 rad range; no joint reaches a stop during the contact.
+DIG_TRAJECTORY = (
+    (0.0, (0.0, 0.85, 1.50, 1.05)),
+    (1.5, (-0.10, 0.76, 1.35, 0.90)),
+    (2.5, (-0.15, 0.70, 1.40, 0.92)),
+    (7.0, (0.10, 0.69, 1.85, 1.32)),
+    (8.5, (0.15, 0.90, 1.80, 1.40)),
+    (10.0, (0.05, 0.88, 1.60, 1.20)),
+)
+#: The load-cell push's trajectory: the tip held mid-workspace while every joint slides
+#: slowly back and forth around mid-stroke (each at its own pace, so that they seldom
+#: stop together), as the machine does when it holds a pose against a push by hand.
+PUSH_TRAJECTORY = (
+    (0.0, (0.0, 0.85, 1.50, 1.05)),
+    (1.0, (-0.12, 0.78, 1.40, 0.95)),
+    (2.7, (0.14, 0.92, 1.66, 1.18)),
+    (4.1, (-0.10, 0.77, 1.37, 0.92)),
+    (5.9, (0.15, 0.93, 1.68, 1.20)),
+    (7.4, (-0.14, 0.78, 1.39, 0.93)),
+    (9.0, (0.10, 0.91, 1.62, 1.15)),
+    (10.0, (0.0, 0.85, 1.50, 1.05)),
+)
+
+
+def closed_loop_dig(boom_raise: float = 0.0) -> JointTrajectoryController:
+    """An operator's dig under closed-loop control (:data:`DIG_TRAJECTORY`, 10 s), the
+    boom's reference raised by ``boom_raise`` [rad] (0.025: the reference tip 1 to 2 cm
+    below the surface instead of 2 to 3 cm, as an operator digs hard ground: deeper asks
+    more than the cylinders have and stalls the arm)."""
+    pts = [(t, (q[0], q[1] + boom_raise, q[2], q[3])) for t, q in DIG_TRAJECTORY]
+    return JointTrajectoryController(pts, kp=OPERATOR_GAINS[0], ki=OPERATOR_GAINS[1], kd=OPERATOR_GAINS[2])
+
+
+def closed_loop_hold() -> JointTrajectoryController:
+    """The tip held mid-workspace, every joint sliding slowly (:data:`PUSH_TRAJECTORY`, 10 s)."""
+    return JointTrajectoryController(PUSH_TRAJECTORY, kp=OPERATOR_GAINS[0], ki=OPERATOR_GAINS[1], kd=OPERATOR_GAINS[2])
+
+
+#: The tip force's benchmark scenarios: name -> (contact scenario, profile).  The first
+#: three are the open-loop digging cycle's (the swing on its stop from 1.2 s to 7.5 s,
+#: the boom, and in hard soil the bucket, pressed on theirs through most of the contact);
+#: the others are what an operator produces: a closed-loop dig through soft and hard
+#: soil with the swing off its stops and the joints sliding, and a load cell's push on the
+#: tip held mid-workspace by the controller, the joints sliding slowly.
+TIP_FORCE_SCENARIOS = {
+    "soft_soil": ("soft_soil", digging_cycle),
+    "hard_soil": ("hard_soil", digging_cycle),
+    "prescribed_push": ("prescribed_push", digging_cycle),
+    "closed_loop_soft": ("soft_soil", closed_loop_dig),
+    "closed_loop_hard": ("hard_soil", lambda: closed_loop_dig(boom_raise=0.025)),
+    "load_cell_push": ("mid_push", closed_loop_hold),
+}
+
+
+def tip_force_scenario(name: str):
+    """``(TipContact, profile)`` of a named tip force scenario of :data:`TIP_FORCE_SCENARIOS`;
+    ValueError listing the known names."""
+    if name not in TIP_FORCE_SCENARIOS:
+        raise ValueError(f"unknown tip force scenario {name!r}; known: {', '.join(TIP_FORCE_SCENARIOS)}")
+    c, p = TIP_FORCE_SCENARIOS[name]
+    return contact(c), p()
 
 
 EXCAVATOR_PROFILES = {"digging_cycle": digging_cycle, "excavator_random_steps": excavator_random_steps,

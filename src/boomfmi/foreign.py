@@ -275,7 +275,8 @@ def read_foreign(path, column_map, *, delimiter: str = "tab", skip_rows: int = 0
                                  column=e.label)
         elif e.column not in head:
             raise RecordingError(path, f"map entry {e.text!r}: no column {e.column!r} in the header (it has "
-                                       f"{', '.join(repr(h) for h in head)})", row=header_line, column=e.label)
+                                       f"{', '.join(repr(h) for h in head)})"
+                                       + _delimiter_hint(head, delimiter, delim), row=header_line, column=e.label)
         else:
             index[e.name] = head.index(e.column)
     need = max(index.values()) + 1
@@ -301,6 +302,18 @@ def read_foreign(path, column_map, *, delimiter: str = "tab", skip_rows: int = 0
         values = _convert(raw[e.name], numbers, e, path, *formats[e.name])
         columns[e.name] = _to_si(values, e)
     return ForeignTable(path, columns, np.asarray(numbers), entries, P_atm)
+
+
+def _delimiter_hint(head, delimiter, delim) -> str:
+    """A hint when a header split by ``delim`` is one field that another delimiter splits."""
+    if len(head) != 1:
+        return ""
+    found = [(n, ch) for n, ch in DELIMITERS.items() if ch and ch != delim and ch != " " and ch in head[0]]
+    if not found:
+        return ""
+    name, ch = max(found, key=lambda f: head[0].count(f[1]))
+    return (f": the header looks {ch!r}-separated, not by --delimiter {delimiter!r}: "
+            f"add --delimiter {name}")
 
 
 def _few_fields(fields, line, need, entry, delimiter, delim) -> str:

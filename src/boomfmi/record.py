@@ -17,6 +17,7 @@ import math
 from pathlib import Path
 
 from .experiments import EXCAVATOR_PROFILES, JOINTS, excavator_profile, profile
+from .paths import default_file
 from .recording import RecordingWriter
 from .system.instance import FmuError, FmuInstance
 
@@ -36,9 +37,10 @@ _MEASURED = (tuple(f"{q}_{j}" for q in ("p_a", "p_b", "angle") for j in JOINTS) 
              + tuple(f"x_{j}" for j in JOINTS))
 EXCAVATOR_OUTPUTS = (tuple(f"u_applied_{j}" for j in JOINTS) + _MEASURED
                      + ("link_ok", "failsafe", "t_rig", "lost_packets"))
-#: The bridges' default places.
-FMU = Path("build/fmus/hardware_bridge.fmu")
-EXCAVATOR_FMU = Path("build/fmus/excavator_bridge.fmu")
+#: The bridges' default places, in the build folder (``paths.built``: the checkout's
+#: ``build/`` or ``$BOOMFMI_BUILD``, whatever the working directory).
+FMU = "fmus/hardware_bridge.fmu"
+EXCAVATOR_FMU = "fmus/excavator_bridge.fmu"
 #: The most steps a run may have: an hour at the DAQ's 1 kHz (the largest recording the
 #: reader takes, ``recording.MAX_BYTES``, holds about that much).
 MAX_STEPS = 3_600_000
@@ -90,9 +92,10 @@ def record_experiment(fmu, rig: str, out, experiment: str = "paper_multistep", s
                       timeout: float = 0.05, retries: int = 2, loss_budget: int = 20) -> dict:
     """Run ``experiment`` on the rig at ``rig`` (udp://HOST:PORT); write ``out``.
 
-    ``fmu`` None: ``build/fmus/hardware_bridge.fmu``, or for an excavator experiment
-    (:func:`record_excavator_experiment`, to which it then hands over)
-    ``build/fmus/excavator_bridge.fmu``.
+    ``fmu`` None: ``build/fmus/hardware_bridge.fmu`` of the checkout (or of
+    ``$BOOMFMI_BUILD``: :mod:`boomfmi.paths`, from any working directory), or for an
+    excavator experiment (:func:`record_excavator_experiment`, to which it then hands
+    over) ``build/fmus/excavator_bridge.fmu``; FileNotFoundError naming where it looked.
 
     ``step`` and ``stop_time`` are checked (:func:`steps`) before anything is opened.
     Nothing is written, and an existing ``out`` is left as it was, until the rig has
@@ -107,9 +110,10 @@ def record_experiment(fmu, rig: str, out, experiment: str = "paper_multistep", s
     Returns the bridge's link figures (``lost_packets``, ``rows``).
     """
     if experiment in EXCAVATOR_PROFILES:
-        return record_excavator_experiment(EXCAVATOR_FMU if fmu is None else fmu, rig, out, experiment, step,
+        return record_excavator_experiment(default_file(EXCAVATOR_FMU, "--fmu") if fmu is None else fmu, rig,
+                                           out, experiment, step,
                                            stop_time, key_file, timeout, retries, loss_budget)
-    fmu = FMU if fmu is None else fmu
+    fmu = default_file(FMU, "--fmu") if fmu is None else fmu
     command = profile(experiment)
     stop = command.duration if stop_time is None else stop_time
     n = steps(step, stop)                               # before anything is opened

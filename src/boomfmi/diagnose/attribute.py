@@ -67,9 +67,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
-from ..compare import CHANNELS, nrmse, recorded, rig_model, shrink, simulate_recording
+from ..compare import CHANNELS, nrmse, rig_model, shrink, simulate_recording
 from ..identify.fit import PRESSURE_COEFFICIENT, identify
-from ..identify.preprocess import lowpass, prepare
+from ..identify.preprocess import ABS_FLOOR, NOISE_FACTOR, noise_floor, prepare
 from ..model import EFFECTS, measure
 
 #: name -> [(parameter, lower, upper, log scale)] of its first law, from the catalogue
@@ -78,8 +78,6 @@ CANDIDATES = {name: [(p.name, p.lower, p.upper, p.log) for p in e.forms[0]] for 
 #: that fits the fit recordings best is kept (a seal leaks laminar or turbulent)
 FORMS = {name: [[(p.name, p.lower, p.upper, p.log) for p in form] for form in e.forms]
          for name, e in EFFECTS.items() if len(e.forms) > 1}
-NOISE_FACTOR = 3.0
-ABS_FLOOR = 0.002
 MIN_SHRINK = 0.35
 MIN_SHRINK_SECOND = 0.4     #: the share of the gap left by the best that a second effect must remove
 PAIR_POOL = 3               #: the candidates among which pairs are tried
@@ -130,14 +128,6 @@ def fit_cost(values: dict, effects: dict, recs) -> float:
     """The fit error a fit minimises: the squares of :func:`mean_errors` at
     ``FIT_RTOL``, summed over the channels."""
     return sum(e * e for e in mean_errors(values, effects, recs, FIT_RTOL).values())
-
-
-def noise_floor(rec) -> dict:
-    """Each channel's measurement noise over its range: the RMS of what a 50 Hz
-    low-pass removes."""
-    m = recorded(rec)
-    fs = 1.0 / float(np.median(np.diff(rec.data["t"].to_numpy(float))))
-    return {c: float(np.std(m[c] - lowpass(m[c], fs, 50.0)) / max(float(np.ptp(m[c])), 1e-12)) for c in CHANNELS}
 
 
 @dataclass

@@ -21,6 +21,7 @@ import numpy as np
 from .. import physics as ph
 from ..compare import initial_state, nrmse, shrink
 from ..model import EFFECTS, fmu_variable, measure
+from ..paths import built
 from ..simulate import run_experiment
 
 #: the FMUs and the reference agree when their shrinks differ by less than this
@@ -28,7 +29,8 @@ AGREEMENT = 0.1
 
 
 def default_ssp() -> Path:
-    return Path(__file__).resolve().parents[3] / "build" / "excavator_boom.ssp"
+    """The boom's SSP in the build folder (``paths.built``), whatever the working directory."""
+    return built("excavator_boom.ssp")
 
 
 def fmu_parameters(values: dict, effects: dict, rec) -> dict:

@@ -15,9 +15,9 @@ from ..compare import nrmse, recorded, rig_model, simulate_recording
 from ..outputs import OutputSet
 from ..recording import check_distinct, check_no_duplicates, check_same_rig, read_checked, recording_inputs
 from ..system.ssv import write_ssv
-from .fit import FitResult, fit_A_max, identify
+from .fit import DEADBAND_WIDEST, SPOOL_LAG, FitResult, fill_rates, identify
 from .paper import identify_paper
-from .preprocess import CUTOFF, prepare
+from .preprocess import CUTOFF, beyond_noise, prepare
 
 #: Where each identified parameter lives in the SSP system.
 SSP_NAMES = {"K_v": "boom_load.K_v", "F_s": "boom_load.F_s", "F_d": "boom_load.F_d",
@@ -44,7 +44,7 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
     result.details["cutoff_Hz"] = cutoff
     _check_physical(result, paths)
     if method == "fit":
-        _check_time_scale(preps, rig, paths, result.params.get("A_max"))
+        _check_time_scale(preps, rig, paths, result)
     return result, recs, preps
 
 
@@ -53,22 +53,46 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
 FLOW_SCALE = 3.0
 
 
-def _check_time_scale(preps, rig, paths, a_max=None) -> None:
-    """The chambers fill and empty at the rate the rig's valve allows (Eq. 1 and 7:
-    the effective A_max from the mass balance, ``fit.fit_A_max``, within a factor
-    FLOW_SCALE of the rig's; ``a_max``: that estimate where identification made it).  A recording whose time runs ten times slow, or whose
-    pressures are in the wrong unit, fails this where the load's equations alone would
-    fit it with values no machine has but that look plausible one by one."""
-    a = a_max or fit_A_max(preps, rig.cylinder, rig.valve, rig.gas)     # (identified already with --a-max)
-    if a is None:
+def _check_time_scale(preps, rig, paths, result) -> None:
+    """The chambers fill and empty at the rate the rig's valve allows (Eq. 1 and 7).  A
+    recording whose time runs ten times slow, or whose pressures are in the wrong unit,
+    fails this where the load's equations alone would fit it with values no machine has
+    but that look plausible one by one.
+
+    Only what the recording can tell is judged (``fit.fill_rates``): the flows at
+    openings beyond the widest dead band a valve has, held on one side of the centre
+    for the spool's lag, against Eq. 1 at that opening.  It refuses when even crediting
+    such a dead band and lag (and the estimate's 95 % interval) the fastest chamber
+    fills FLOW_SCALE times slower than the valve allows, or when even without them the
+    slowest fills FLOW_SCALE times faster.  Small openings (slow ramps around the
+    centre, long holds) fill slowly by nature and tell nothing: where a recording holds
+    no other, the check says so in a warning and does not refuse."""
+    rates = fill_rates(preps, rig.cylinder, rig.valve, rig.gas)
+    a_ref = rig.valve.A_max
+    if not rates.at_least:
+        result.warnings.append(
+            f"the time scale was not checked against the valve: the recordings hold no opening wider than "
+            f"{DEADBAND_WIDEST:g} V from the centre held for {1e3 * SPOOL_LAG:.0f} ms (50 samples at least), "
+            f"and smaller openings fill slowly whatever the time scale")
         return
-    ratio = a.value / rig.valve.A_max
-    if not 1.0 / FLOW_SCALE < ratio < FLOW_SCALE:
-        raise ValueError(f"identification from {', '.join(str(p) for p in paths)}: the chambers fill and empty "
-                         f"{ratio:.2g} times as fast as the rig's valve allows (the pressures imply an orifice "
-                         f"of {a.value:.3g} m2, the rig's A_max is {rig.valve.A_max:.3g} m2); no machine has such "
-                         f"values: check the recordings' units (t in s, pressures in Pa gauge), or give the rig's "
-                         f"own valve and supply in the recording's sidecar")
+    names = ", ".join(str(p) for p in paths)
+    slow = max(e.ci95[1] for e in rates.at_least.values()) < a_ref / FLOW_SCALE
+    fast = min(e.ci95[0] for e in rates.at_most.values()) > a_ref * FLOW_SCALE
+    if not (slow or fast):
+        return
+    nominal = (max if slow else min)(e.value for e in rates.nominal.values())
+    bound = (max(e.ci95[1] for e in rates.at_least.values()) if slow
+             else min(e.ci95[0] for e in rates.at_most.values()))
+    ratio = nominal / a_ref
+    raise ValueError(f"identification from {names}: the chambers fill and empty "
+                     f"{ratio:.2g} times as fast as the rig's valve allows (the pressures imply an orifice "
+                     f"of {nominal:.3g} m2, the rig's A_max is {a_ref:.3g} m2; "
+                     + (f"at most {bound / a_ref:.2g} times even with a {DEADBAND_WIDEST:g} V dead band"
+                        if slow else f"at least {bound / a_ref:.2g} times even with no dead band")
+                     + f", over {sum(rates.samples.values())} samples at openings wider than "
+                     f"{DEADBAND_WIDEST:g} V); no machine has such "
+                     f"values: check the recordings' units (t in s, pressures in Pa gauge), or give the rig's "
+                     f"own valve and supply in the recording's sidecar")
 
 
 #: Identified parameters that no machine has below these values (M and A_max: above)
@@ -98,26 +122,30 @@ def _check_physical(result: FitResult, paths) -> None:
                                    f"treat {k} as unknown in its precision")
 
 
-def plot_fit(values: dict, rec, path) -> None:
-    """Recorded and simulated x, p_a, p_b over the experiment (the paper's Fig. 6)."""
+def plot_fit(values: dict, recs, path) -> None:
+    """Recorded and simulated x, p_a, p_b over each fit recording (the paper's Fig. 6):
+    one column per recording, in one figure."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    rig = rig_model(rec)
-    sim = simulate_recording(values, rec, rig=rig)
-    t = rec.data["t"].to_numpy()
-    x_rec = recorded(rec, rig)["x"]
-    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
-    axes[0].plot(t, 1e3 * x_rec, lw=0.8, label="recorded")
-    axes[0].plot(t, 1e3 * sim["x"], lw=1.0, label="model, identified parameters")
-    axes[0].set_ylabel("x [mm]")
-    for ax, ch in ((axes[1], "p_a"), (axes[2], "p_b")):
-        ax.plot(t, rec.data[ch] / 1e5, lw=0.8)
-        ax.plot(t, sim[ch] / 1e5, lw=1.0)
-        ax.set_ylabel(f"{ch} [bar gauge]")
-    axes[2].set_xlabel("t [s]")
-    axes[0].legend(loc="upper left")
-    axes[0].set_title(f"{Path(rec.path).name}: recorded and simulated response")
+    recs = list(recs) if isinstance(recs, (list, tuple)) else [recs]
+    fig, grid = plt.subplots(3, len(recs), sharex="col", figsize=(9 * len(recs), 7), squeeze=False)
+    for k, rec in enumerate(recs):
+        axes = grid[:, k]
+        rig = rig_model(rec)
+        sim = simulate_recording(values, rec, rig=rig)
+        t = rec.data["t"].to_numpy()
+        x_rec = recorded(rec, rig)["x"]
+        axes[0].plot(t, 1e3 * x_rec, lw=0.8, label="recorded")
+        axes[0].plot(t, 1e3 * sim["x"], lw=1.0, label="model, identified parameters")
+        axes[0].set_ylabel("x [mm]")
+        for ax, ch in ((axes[1], "p_a"), (axes[2], "p_b")):
+            ax.plot(t, rec.data[ch] / 1e5, lw=0.8)
+            ax.plot(t, sim[ch] / 1e5, lw=1.0)
+            ax.set_ylabel(f"{ch} [bar gauge]")
+        axes[2].set_xlabel("t [s]")
+        axes[0].legend(loc="upper left")
+        axes[0].set_title(f"{Path(rec.path).name}: recorded and simulated response")
     fig.tight_layout()
     fig.savefig(path, dpi=110, format="png")
     plt.close(fig)
@@ -140,7 +168,8 @@ def write_outputs(result: FitResult, recs, out, holdout=()) -> dict:
     finite = {k: v for k, v in values.items() if math.isfinite(v)}
     doc["nrmse_fit"] = {str(r.path): nrmse(simulate_recording(finite, r), r) for r in recs} if _usable(finite) else {}
     for hr in holds:
-        doc.setdefault("nrmse_holdout", {})[str(hr.path)] = nrmse(simulate_recording(finite, hr), hr)
+        err = doc.setdefault("nrmse_holdout", {})[str(hr.path)] = nrmse(simulate_recording(finite, hr), hr)
+        doc.setdefault("holdout_gap", {})[str(hr.path)] = beyond_noise(err, hr)
     physical = not any(w.startswith("not physical") for w in result.warnings)
     names = (out.name, out.with_suffix(".ssv").name, out.with_suffix(".png").name)
     with OutputSet(out.parent, stale=names,
@@ -150,7 +179,7 @@ def write_outputs(result: FitResult, recs, out, holdout=()) -> dict:
                       {SSP_NAMES[k]: (v, result.params[k].unit) for k, v in finite.items()},
                       f"identified by boomfmi ({result.method}) from " + ", ".join(str(r.path) for r in recs))
         if physical and _usable(finite):
-            plot_fit(finite, recs[0], files.path(names[2]))
+            plot_fit(finite, recs, files.path(names[2]))
         doc["written"] = [str(p) for p in [out, *files.written()]]
         files.path(names[0]).write_text(dumps(doc, indent=2))
     return doc

@@ -359,5 +359,95 @@ def summary_lines(doc: dict) -> list[str]:
     return lines
 
 
+def read_params(path) -> dict[str, float]:
+    """The values an excavator ``params.json`` (:func:`write_excavator_outputs`) binds
+    (each parameter's ``ssv_value``: what the machine can have); ValueError naming the
+    file for one that is not JSON, not the whole excavator's or binds nothing."""
+    import json
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: no such file (--model names the params.json `boomfmi identify` "
+                                f"wrote from the excavator's recordings)") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ValueError(f"{path}: not a params.json ({e})") from None
+    if not isinstance(doc, dict) or doc.get("kind") != "excavator" or not isinstance(doc.get("params"), dict):
+        raise ValueError(f"{path}: not the whole excavator's params.json (\"kind\": \"excavator\" and its "
+                         f"\"params\", as `boomfmi identify` writes them from excavator recordings)")
+    values = {}
+    for name, p in doc["params"].items():
+        v = p.get("ssv_value") if isinstance(p, dict) else None
+        if v is None:
+            continue
+        if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
+            raise ValueError(f"{path}: params.{name}.ssv_value = {v!r} is not a finite number")
+        values[name] = float(v)
+    if not values:
+        raise ValueError(f"{path}: binds no value (every ssv_value is null): nothing identified to simulate")
+    return values
+
+
+#: The tip force's columns of an excavator run file: the estimate and, per axis, the
+#: interval of tip forces consistent with the recording (``physics.excavator_force``;
+#: a side at ``+-excavator_force.F_BOUND`` is open: a stop or a sticking joint leaves
+#: it unbounded).
+RUN_FORCES = tuple(f"{k}_{a}" for k in ("f_tip_est", "f_tip_lo", "f_tip_hi") for a in "xyz")
+
+
+def excavator_run(rec, values: dict[str, float], ex: exc.Excavator | None = None) -> pd.DataFrame:
+    """The excavator run file of a recording (the view's ``load_excavator_run``): the
+    machine identified as ``values`` (:func:`read_params`) simulated on the
+    recording's commands (:func:`simulate_machine`) beside the machine, the model's
+    columns unsuffixed (``angle_<j>`` from its pistons, ``p_a_<j>``, ``p_b_<j>``), the
+    recording's ``_measured``, its commands ``u_<j>`` and true ``f_tip_x/y/z`` where it
+    has them, and :data:`RUN_FORCES` from the force estimator on the recording."""
+    from ..physics.excavator_force import estimate_tip_force
+    d = rec.data
+    machine, payload = bound_machine(values, machine_for(rec, ex))
+    sim = simulate_machine(rec, machine, payload)
+    out = {"t": d["t"].to_numpy(float)}
+    for j in JOINTS:
+        out[f"u_{j}"] = d[f"u_{j}"].to_numpy(float)
+    angles = exc.joint_angles(np.column_stack([sim[f"x_{j}"].to_numpy(float) for j in JOINTS]), machine)
+    for i, j in enumerate(JOINTS):
+        out[f"angle_{j}"] = angles[:, i]
+        out[f"p_a_{j}"], out[f"p_b_{j}"] = sim[f"p_a_{j}"].to_numpy(float), sim[f"p_b_{j}"].to_numpy(float)
+    for j in JOINTS:
+        for q in ("angle", "p_a", "p_b"):
+            out[f"{q}_{j}_measured"] = d[f"{q}_{j}"].to_numpy(float)
+    if all(f"f_tip_{a}" in d for a in "xyz"):
+        out.update({f"f_tip_{a}": d[f"f_tip_{a}"].to_numpy(float) for a in "xyz"})
+    f, _, lo, hi = estimate_tip_force(d, machine, payload, P_atm=float(getattr(rec, "P_atm", machine.P_atm)),
+                                      bounds=True)
+    for k, arr in (("f_tip_est", f), ("f_tip_lo", lo), ("f_tip_hi", hi)):
+        out.update({f"{k}_{a}": arr[:, i] for i, a in enumerate("xyz")})
+    return pd.DataFrame(out)
+
+
+def write_excavator_run(recording, params, out, progress=None) -> Path:
+    """Write ``out``, the excavator run file (:func:`excavator_run`) of the excavator
+    ``recording`` with the identified ``params`` (params.json), beside the recording's
+    sidecar values; as ``record`` writes, an existing ``out`` is replaced only once the
+    whole run is written (``recording.RecordingWriter``), and ``out`` may not be one of
+    the inputs."""
+    from ..outputs import check_not_inputs
+    from ..recording import sidecar_path, write_recording
+    say = progress or (lambda text: None)
+    out = Path(out)
+    if out.suffix.lower() != ".csv":
+        raise ValueError(f"{out}: the run file is a recording: give it the .csv suffix (its sidecar goes "
+                         f"beside it as {out.with_suffix('.json').name})")
+    check_not_inputs([out, sidecar_path(out)], [(Path(params), f"the model {params}"),
+                                                 *recording_inputs([recording])])
+    rec = read_checked([recording], "excavator", "recording")[0]
+    values = read_params(params)
+    say(f"simulating the identified machine on {rec.path} and estimating the tip force")
+    run = excavator_run(rec, values)
+    notes = f"the machine identified in {params} beside the recording {rec.path} (boomfmi)"
+    return write_recording(out, run, {"rig": dict(rec.rig), "notes": notes})
+
+
 __all__ = ["identify_excavator_recordings", "write_excavator_outputs", "simulate_machine", "excavator_nrmse",
-           "ssv_values", "cannot_tell", "summary_lines", "SSP_COMPONENT"]
+           "ssv_values", "cannot_tell", "summary_lines", "SSP_COMPONENT", "read_params", "excavator_run",
+           "write_excavator_run", "RUN_FORCES"]

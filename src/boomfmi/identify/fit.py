@@ -693,6 +693,89 @@ def fit_A_max(preps: list[Prepared], cyl: ph.Cylinder, valve: ph.Valve, gas: ph.
     return Estimate(A, (A - 1.96 * se, A + 1.96 * se), "m2")
 
 
+#: The widest dead band (spool overlap) a proportional valve is taken to have [V]:
+#: the time-scale check credits any opening up to it as possibly closed.
+DEADBAND_WIDEST = 0.75
+#: The longest the spool may take to follow the command [s]: the check takes the
+#: smallest (and largest) opening the command held over this time before each sample.
+SPOOL_LAG = 0.03
+
+
+@dataclass
+class FillRate:
+    """How fast the chambers fill and empty, as an orifice area [m^2] against Eq. 1's
+    flow at the recorded opening and pressures, per chamber (``"A"``, ``"B"``).
+    ``nominal``: at the opening the command gives; ``at_least``: what the valve's area
+    must at least be for the recorded flows even if the valve had a dead band of
+    ``DEADBAND_WIDEST`` and lagged ``SPOOL_LAG`` (each an Estimate with its 95 %
+    interval); ``at_most``: what it can at most be with no dead band and the widest
+    opening of the lag window.  ``samples``: the informative samples per chamber
+    (the opening beyond the widest dead band, one side of the centre throughout the
+    lag window)."""
+    nominal: dict
+    at_least: dict
+    at_most: dict
+    samples: dict
+
+
+def _window_extremes(a: np.ndarray, n: int):
+    """Smallest and largest of ``a`` over each sample and the ``n`` before it."""
+    if n <= 0:
+        return a, a
+    pad = np.concatenate((np.full(n, a[0]), a))
+    w = np.lib.stride_tricks.sliding_window_view(pad, n + 1)
+    return w.min(axis=1), w.max(axis=1)
+
+
+def fill_rates(preps: list[Prepared], cyl: ph.Cylinder, valve: ph.Valve, gas: ph.Gas,
+               deadband: float = DEADBAND_WIDEST, lag: float = SPOOL_LAG) -> FillRate:
+    """The chambers' measured filling and emptying (Eq. 7 solved for the flows) against
+    what the valve allows at the recorded opening and pressures (Eq. 1), over the
+    samples where the opening is known well enough to tell: beyond ``deadband`` from
+    the centre and on one side of it over the last ``lag`` seconds.  Small openings
+    (a slow ramp around the centre, a long hold) tell nothing about the valve's area:
+    a dead band, a lagging spool or an uneven opening law change their flow by any
+    factor, so they are not used."""
+    X = {c: {"nominal": [], "at_least": [], "at_most": []} for c in "AB"}
+    Y = {c: [] for c in "AB"}
+    full = valve._replace(A_max=1.0)
+    span = valve.u_span
+    for p in preps:
+        mdot = ph.chamber_inflows(p.p_a, p.p_b, np.gradient(p.p_a, p.t), np.gradient(p.p_b, p.t),
+                                  p.x, p.v, cyl, gas)
+        s = p.u - valve.u_centre
+        lo, hi = _window_extremes(s, int(round(lag * p.fs)))
+        one_side = (lo > 0) | (hi < 0)
+        smallest = np.where(one_side, np.minimum(np.abs(lo), np.abs(hi)), 0.0)
+        largest = np.maximum(np.abs(lo), np.abs(hi))
+        opening = {"nominal": np.minimum(np.abs(s) / span, 1.0),
+                   "at_least": np.clip((smallest - deadband) / (span - deadband), 0.0, 1.0),
+                   "at_most": np.minimum(largest / span, 1.0)}
+        wide = valve.u_centre + np.sign(s) * span           # full opening on the command's side
+        g_full = ph.chamber_flows(wide, p.p_a, p.p_b, full, gas)
+        for c, g, md in zip("AB", g_full, mdot):
+            g_least = opening["at_least"] * g
+            sel = one_side & (opening["at_least"] > 0) & (np.abs(g_least) > 0.05 * np.abs(g_least).max(initial=0.0))
+            for k in X[c]:
+                X[c][k].append(opening[k][sel] * g[sel])
+            Y[c].append(md[sel])
+    out = {"nominal": {}, "at_least": {}, "at_most": {}}
+    samples = {}
+    corr = correlation_samples(preps[0])
+    for c in "AB":
+        y = np.concatenate(Y[c])
+        samples[c] = len(y)
+        if len(y) < 50:
+            continue
+        for k, xs in X[c].items():
+            x = np.concatenate(xs)
+            A = float(x @ y / (x @ x))
+            r = y - A * x
+            se = math.sqrt(float(r @ r) / max(len(y) - 1, 1) / float(x @ x) * corr)
+            out[k][c] = Estimate(A, (A - 1.96 * se, A + 1.96 * se), "m2")
+    return FillRate(out["nominal"], out["at_least"], out["at_most"], samples)
+
+
 def identify(preps: list[Prepared], cyl: ph.Cylinder = ph.Cylinder(), P_atm: float = reference_rig.P_atm,
              with_A_max: bool = False, valve: ph.Valve = ph.Valve(), gas: ph.Gas = ph.Gas(),
              v_s: float = 0.0, pressure: str | None = None) -> FitResult:

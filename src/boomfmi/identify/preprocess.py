@@ -75,3 +75,28 @@ def prepare(rec: Recording, cutoff: float = CUTOFF, geometry: ph.Geometry | None
                     p_b=lowpass(p_b_raw, fs, cutoff), x=x, v=v, a=a,
                     phi=ph.phi_from_x(np.clip(x, 0.0, None), geometry), x_raw=x_raw,
                     p_a_raw=p_a_raw, p_b_raw=p_b_raw, fs=fs, cutoff=cutoff, source=str(rec.path))
+
+
+#: A holdout error (the NRMSE summed over x, p_a, p_b) beyond NOISE_FACTOR times the
+#: noise floor (summed likewise) plus ABS_FLOOR is a gap the model does not explain.
+NOISE_FACTOR = 3.0
+ABS_FLOOR = 0.002
+
+
+def beyond_noise(errors: dict, rec) -> dict:
+    """Whether the ``errors`` (channel -> NRMSE) of a model against ``rec`` are a gap
+    beyond its noise: ``beyond_noise``, ``nrmse_sum``, ``noise_floor_sum``, ``threshold``."""
+    noise = float(sum(noise_floor(rec).values()))
+    threshold = NOISE_FACTOR * noise + ABS_FLOOR
+    total = float(sum(errors.values()))
+    return {"beyond_noise": total > threshold, "nrmse_sum": total, "noise_floor_sum": noise, "threshold": threshold}
+
+
+def noise_floor(rec) -> dict:
+    """Each channel's measurement noise over its range (x, p_a, p_b: the NRMSE a
+    perfect model would still show): the RMS of what a 50 Hz low-pass removes.  The
+    floor ``identify`` judges a holdout error against and ``diagnose`` its gaps."""
+    from ..compare import CHANNELS, recorded
+    m = recorded(rec)
+    fs = 1.0 / float(np.median(np.diff(rec.data["t"].to_numpy(float))))
+    return {c: float(np.std(m[c] - lowpass(m[c], fs, 50.0)) / max(float(np.ptp(m[c])), 1e-12)) for c in CHANNELS}

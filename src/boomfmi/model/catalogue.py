@@ -51,6 +51,7 @@ class Parameter(NamedTuple):
     switch: bool = True  #: a value > 0 switches the effect on (False: a setting only)
     max: Optional[float] = None  #: the FMU variable's declared maximum
     on_min: Optional[float] = None  #: the least value that is on (0 < value < on_min is refused)
+    no_max: str = ""    #: why the FMU variable declares no maximum (required where ``max`` is None)
 
 
 class Effect(NamedTuple):
@@ -117,23 +118,31 @@ def _p(name, unit, lower, upper, log, option, description, **kw):
     return Parameter(name, unit, lower, upper, log, option, description, **kw)
 
 
+#: the reason most effect options declare no maximum (``Parameter.no_max``)
+SIZE_UNBOUNDED = "an unmodelled effect's size: no physical bound (the catalogue's fitting range is not one)"
+
+
 _TAU_SENSOR = _p("tau", "s", 2e-4, 0.03, True, "tau_sensor",
-                 "sensor_lag: time constant of a first-order lag on every measured channel; 0: off")
+                 "sensor_lag: time constant of a first-order lag on every measured channel; 0: off",
+                 no_max=SIZE_UNBOUNDED)
 _C_LEAK = _p("C", "kg/(s.Pa)", 1e-13, 5e-10, True, "C_leak",
-             "piston_leakage: laminar conductance of the piston seal, A to B; 0: off")
+             "piston_leakage: laminar conductance of the piston seal, A to B; 0: off", no_max=SIZE_UNBOUNDED)
 _A_LEAK = _p("A", "m2", 1e-10, 2e-7, True, "A_leak",
-             "piston_leakage: area of a turbulent leak gap across the piston seal (orifice law); 0: off")
+             "piston_leakage: area of a turbulent leak gap across the piston seal (orifice law); 0: off",
+             no_max=SIZE_UNBOUNDED)
 
 _CUSHION_LENGTH = _p("length", "m", 2e-3, 0.02, False, "l_cushion",
                      "end_cushioning: cushion length at each end of stroke (at most L/2); 0: off", max=L_MAX / 2)
 _CUSHION_AREA = _p("A_n", "m2", 1e-8, 4e-6, True, "A_cushion",
-                   "end_cushioning: cushion needle's orifice area", start=1e-7, switch=False)
+                   "end_cushioning: cushion needle's orifice area", start=1e-7, switch=False,
+                   no_max=SIZE_UNBOUNDED)
 
 #: name -> :class:`Effect`, in the order of ``effects.md``
 EFFECTS = {e.name: e for e in (
     Effect("valve_dynamics", "valve", "spool",
            ((_p("tau", "s", 2e-4, 0.05, True, "tau_spool",
-                "valve_dynamics: time constant of the spool's first-order lag; 0: off"),),),
+                "valve_dynamics: time constant of the spool's first-order lag; 0: off",
+                no_max=SIZE_UNBOUNDED),),),
            "first-order lag of the spool: dy/dt = (u - y) / tau"),
     Effect("valve_deadband", "valve", "command",
            ((_p("width", "V", 0.01, 1.5, True, "deadband",
@@ -142,7 +151,8 @@ EFFECTS = {e.name: e for e in (
            _deadband),
     Effect("heat_transfer", "cylinder", "heat",
            ((_p("h", "W/(m2.K)", 1.0, 2000.0, True, "h_wall",
-                "heat_transfer: heat-transfer coefficient between the air and the chamber wall; 0: off"),),
+                "heat_transfer: heat-transfer coefficient between the air and the chamber wall; 0: off",
+                no_max=SIZE_UNBOUNDED),),
             (_p("n", "1", 1.0, 1.4, False, "n_poly",
                 "heat_transfer: polytropic exponent of the chambers' process, in place of k in Eq. 4 to 7 "
                 "(1: isothermal, 1.4: isentropic); 0: off", max=1.4, on_min=1.0),)),
@@ -156,7 +166,8 @@ EFFECTS = {e.name: e for e in (
            "of area A (the orifice law, Eq. 1), or both at once (a worn seal), whichever fits", _leak),
     Effect("stribeck_friction", "boom_load", "friction",
            ((_p("v_s", "m/s", 2e-4, 0.1, True, "v_s",
-                "stribeck_friction: Stribeck velocity of exp(-|v|/v_s); 0: off (the paper's step)"),),),
+                "stribeck_friction: Stribeck velocity of exp(-|v|/v_s); 0: off (the paper's step)",
+                no_max=SIZE_UNBOUNDED),),),
            "Coulomb level F_d + (F_s - F_d) exp(-|v| / v_s)", _stribeck),
     Effect("end_cushioning", "cylinder", "port",
            ((_CUSHION_LENGTH, _CUSHION_AREA),
@@ -164,7 +175,8 @@ EFFECTS = {e.name: e for e in (
              _p("V_p", "m3", 3e-7, 1.2e-5, True, "V_cushion_port",
                 "end_cushioning: the port's volume (part of the dead volume, between the cushion's "
                 "spear and the valve), cut off the chamber within the cushion; 0: none",
-                switch=False))),
+                switch=False, no_max="part of the dead volumes V_a0, V_b0, which have none: refused at "
+                                     "initialisation where it is not smaller"))),
            "within length of a chamber's end, its outflow also passes the cushion needle "
            "(area A_n, to the exhaust) in series with the valve; inflow passes freely (the check "
            "valve); where the port's volume V_p is given, the chamber the sensor reads is left "
@@ -173,20 +185,21 @@ EFFECTS = {e.name: e for e in (
     Effect("pressure_friction", "boom_load", "friction",
            ((_p("c_sum", "N/Pa", 1e-7, 2e-4, True, "c_friction_sum",
                 "pressure_friction: rise of the static and Coulomb friction per pascal of the chambers' "
-                "summed gauge pressure; 0: off"),),
+                "summed gauge pressure; 0: off", no_max=SIZE_UNBOUNDED),),
             (_p("c_max", "N/Pa", 1e-7, 2e-4, True, "c_friction_max",
                 "pressure_friction: rise of the static and Coulomb friction per pascal of the higher "
-                "chamber's gauge pressure; 0: off"),),
+                "chamber's gauge pressure; 0: off", no_max=SIZE_UNBOUNDED),),
             (_p("c_diff", "N/Pa", 1e-7, 2e-4, True, "c_friction_diff",
                 "pressure_friction: rise of the static and Coulomb friction per pascal of pressure "
-                "difference across the piston; 0: off"),)),
+                "difference across the piston; 0: off", no_max=SIZE_UNBOUNDED),)),
            "the seals pressed by the pressure they hold: F_s and F_d both grow by c_sum times the "
            "chambers' summed gauge pressure (the real friction tests' law), by c_max times the higher "
            "chamber's, or by c_diff times the pressure difference across the piston, whichever fits", _pressure_friction),
     Effect("sensor_lag", "hardware_bridge", "measurement",
            ((_TAU_SENSOR,),
             (_TAU_SENSOR, _p("delay", "s", 2e-4, 0.02, True, "delay_sensor",
-                             "sensor_lag: dead time of every measured channel (before its lag); 0: none"))),
+                             "sensor_lag: dead time of every measured channel (before its lag); 0: none",
+                             no_max=SIZE_UNBOUNDED))),
            "a first-order lag of every measured channel, or a dead time then the lag, whichever fits"),
 )}
 

@@ -129,6 +129,84 @@ def tip_force_determined(q, tau, informative, ex: exc.Excavator = exc.Excavator(
     return f, known
 
 
+#: [N] The tip force bounds' box: no tip force beyond this along any world axis (some
+#: ten times the cylinders' largest push at the tip).  A bound at +-F_BOUND says the
+#: recording does not bound that side (a stop takes any force towards it, or the
+#: joints that feel the axis stick with nothing to hold them from one side).
+F_BOUND = 500.0
+#: [1] The sliding law's tolerance per cylinder, as a share of its static friction
+#: ``F_s`` (which scales with the bore, as the pressures' noise on the piston does):
+#: what the angle sensor's noise and steps through the motion filter and the pressures'
+#: noise make of the net force.
+BAND_SLIDE = 0.1
+#: [1] The tolerance's share of the filtered net force's change over the filters' delay.
+BAND_RATE = 1.0
+#: [m/s] The bounds take a joint's sliding law only above this speed (by both filters):
+#: a joint that has just stopped still reads as sliding through the slow filter's
+#: delay, and its static friction may hold more than its sliding friction; below it
+#: its friction band (which holds any slow creep's) bounds it instead.
+V_SLIDE_BOUNDS = 3e-3
+#: [s] The bounds reported are the union of this long a window's samples' sets.
+T_HOLD = 0.01
+#: The triples of constraints whose planes' intersections are the candidate vertices
+#: of the set of tip forces (four joints times two sides, and the box's six).
+_TRIPLES = np.array([(a, b, c) for a in range(14) for b in range(a + 1, 14) for c in range(b + 1, 14)])
+
+
+def joint_force_bands(x, v, a, drive, sliding, at_lower, at_upper, ex: exc.Excavator = exc.Excavator(),
+                      payload: float = 0.0, band=BAND_SLIDE):
+    """Per joint, the interval ``(lo, hi)`` [N m] of ``(J^T f_tip)_i`` consistent with one
+    sample within the tolerance ``band`` [N on the piston, one for all or per joint]:
+    a sliding joint (``sliding`` -1 or +1) the sliding law's value +-``band``; any other
+    its net force +- its static friction ``F_s scale`` (which also covers a slow creep's
+    ``K_v v + F_d``) and ``band``; a joint pressed on its lower stop (``at_lower``) no
+    lower bound, on its upper (``at_upper``) no upper bound (``-inf`` / ``inf``)."""
+    x = np.clip(np.asarray(x, float), 0.0, ex.strokes)
+    v = np.asarray(v, float)
+    Mx, bias, lam = exc.piston_dynamics(x, v, payload, ex)
+    g0 = Mx @ np.asarray(a, float) + bias - np.asarray(drive, float)
+    scale = exc.friction_scale(x, ex)
+    band = np.broadcast_to(np.asarray(band, float), (4,))
+    sliding = np.asarray(sliding, float)
+    lo, hi = np.empty(4), np.empty(4)
+    for i, act in enumerate(ex.actuators):
+        if sliding[i] != 0:
+            mid = g0[i] + act.K_v * v[i] + np.sign(sliding[i]) * act.F_d * scale[i]
+            lo[i], hi[i] = mid - band[i], mid + band[i]
+        else:
+            hold = act.F_s * scale[i] + band[i]
+            lo[i], hi[i] = g0[i] - hold, g0[i] + hold
+    lo = np.where(np.asarray(at_lower, bool), -np.inf, lo)
+    hi = np.where(np.asarray(at_upper, bool), np.inf, hi)
+    return lo / lam, hi / lam
+
+
+def tip_force_interval(q, tau_lo, tau_hi, ex: exc.Excavator = exc.Excavator(), f_bound: float = F_BOUND):
+    """Per world axis the smallest and largest tip force [N] with ``tau_lo <= J(q)^T f <=
+    tau_hi`` (per joint, [N m], ``-inf`` / ``inf`` for an open side) and ``|f_k| <=
+    f_bound``: ``(lo, hi, feasible)``, 3-vectors and a bool.  Exact (the set is a
+    polytope in three dimensions: each end is one of its vertices, the intersections of
+    three of its planes that satisfy every constraint), plain NumPy.  A side at
+    ``+-f_bound`` is unbounded by the recording.  Where no force satisfies them all
+    (``feasible`` false) the box, ``-f_bound .. f_bound``."""
+    JT = exc.tip_jacobian(q, ex).T
+    A = np.vstack([JT, -JT, np.eye(3), -np.eye(3)])
+    big = 1e3 * f_bound * max(1.0, float(np.max(np.abs(JT))))
+    b = np.concatenate([np.minimum(np.asarray(tau_hi, float), big), np.minimum(-np.asarray(tau_lo, float), big),
+                        np.full(6, float(f_bound))])
+    A3, b3 = A[_TRIPLES], b[_TRIPLES]
+    det = np.linalg.det(A3)
+    ok = np.abs(det) > 1e-9
+    verts = np.linalg.solve(A3[ok], b3[ok][..., None])[..., 0]
+    tol = 1e-7 * (np.abs(b) + 1.0)
+    inside = np.all(verts @ A.T <= b + tol, axis=1)
+    if not inside.any():
+        box = np.full(3, float(f_bound))
+        return -box, box, False
+    verts = verts[inside]
+    return verts.min(axis=0), verts.max(axis=0), True
+
+
 def _low_pass_known(prev, new, dt: float, tau: float):
     """The estimate's first-order low-pass, per component, restarted at the new value
     where the previous one was unknown (nan) and unknown where the new one is."""
@@ -164,12 +242,15 @@ def observer_start(angles, p_a, p_b, ex: exc.Excavator = exc.Excavator()):
     x = exc.pistons_from_angles(np.asarray(angles, float), ex)
     F = exc.cylinder_forces(p_a, p_b, ex)
     return {"x_slow": x, "v_slow": np.zeros(4), "x": x, "v": np.zeros(4), "F": F, "dF": np.zeros(4), "f": np.zeros(3), "f_known": np.full(3, np.nan),
+            "f_lo": np.full(3, -F_BOUND), "f_hi": np.full(3, F_BOUND),
             "informative": np.zeros(4, bool)}
 
 
 def observer_step(state: dict, angles, p_a, p_b, dt: float, omega, ex: exc.Excavator = exc.Excavator(),
                   payload: float = 0.0, tau_est: float = 0.004, rest_weight: float = 0.3,
-                  stop_weight: float = 0.02, v_info: float = 1e-3, f_info: float = 3.0):
+                  stop_weight: float = 0.02, v_info: float = 1e-3, f_info: float = 3.0,
+                  band_slide=BAND_SLIDE, band_rate: float = BAND_RATE, f_bound: float = F_BOUND,
+                  t_hold: float = T_HOLD):
     """One step of the excavator's tip-force observer with the measurements held over
     ``dt`` [s]: joint ``angles`` [rad], absolute pressures [Pa] (4-vectors); ``omega``
     [rad/s] the filters' corner, one for all joints or one per joint (swing, boom,
@@ -190,7 +271,20 @@ def observer_step(state: dict, angles, p_a, p_b, dt: float, omega, ex: exc.Excav
     Beside the least-squares estimate over all four joints, the estimate from the
     informative joints alone, ``nan`` where they do not determine a component
     (:func:`tip_force_determined`), as ``state["f_known"]``, and their mask as
-    ``state["informative"]``."""
+    ``state["informative"]``.
+
+    The bounds where the machine cannot tell: ``state["f_lo"]``, ``state["f_hi"]`` [N]
+    per world axis, the interval of tip forces consistent with the sample
+    (:func:`joint_force_bands`, :func:`tip_force_interval`): a sliding joint's
+    equation within ``band_slide`` times its static friction [N on the piston, a share
+    per joint or one for all] plus ``band_rate`` times its
+    filtered pneumatic force's change over the filter's delay (``2 / omega``); a
+    resting joint's friction band; one side open for a joint on a stop; ``+-f_bound``
+    where the recording leaves a side open.  Where no force fits the bands, they are
+    widened twice by a factor of 4 before the box ``+-f_bound`` is reported.  The
+    interval reported is the union of the last ``t_hold`` [s] of samples' (the
+    classification of a joint as sliding or sticking flips with the sensor's noise
+    around a start or a stop, and the sets of neighbouring samples with it)."""
     xm = exc.pistons_from_angles(np.asarray(angles, float), ex)
     Fm = exc.cylinder_forces(p_a, p_b, ex)
     omega = np.broadcast_to(np.asarray(omega, float), (4,))
@@ -228,9 +322,23 @@ def observer_step(state: dict, angles, p_a, p_b, dt: float, omega, ex: exc.Excav
     f, residual = tip_force_from_torques(q, tau, w, ex)
     f_est = np.array([first_order_step(state["f"][k], f[k], dt, tau_est) for k in range(3)])
     f_det, _ = tip_force_determined(q, tau, info, ex)
+    band = (np.asarray(band_slide, float) * np.array([a.F_s for a in ex.actuators])
+            + band_rate * np.abs(dF_new) * 2.0 / omega)
+    sliding_dir = np.where(info & (np.abs(v_both) > V_SLIDE_BOUNDS), np.sign(v_slow), 0.0)
+    xl, xu = np.minimum(x_mid, xm), np.maximum(x_mid, xm)
+    for widen in (1.0, 4.0, 16.0):
+        t_lo, t_hi = joint_force_bands(x_mid, np.where(moving, v_mean, 0.0), np.where(moving, a_mean, 0.0), F_mid,
+                                       sliding_dir, xl <= 5e-4, xu >= ex.strokes - 5e-4, ex, payload, widen * band)
+        f_lo, f_hi, feasible = tip_force_interval(q, t_lo, t_hi, ex, f_bound)
+        if feasible:
+            break
     new = {"x_slow": x_slow, "v_slow": v_slow, "x": np.asarray(xs), "v": np.asarray(vs), "F": F_new, "dF": dF_new,
            "f": f_est, "f_known": _low_pass_known(state.get("f_known", np.full(3, np.nan)), f_det, dt, tau_est),
            "informative": info}
+    n_hold = max(1, int(round(t_hold / dt)) + 1) if dt > 0 else 1
+    new["bounds_recent"] = (state.get("bounds_recent", [])[-(n_hold - 1):] if n_hold > 1 else []) + [(f_lo, f_hi)]
+    new["f_lo"] = np.min([b[0] for b in new["bounds_recent"]], axis=0)
+    new["f_hi"] = np.max([b[1] for b in new["bounds_recent"]], axis=0)
     return new, f_est, residual, tau
 
 
@@ -244,13 +352,19 @@ def reflected_force_3d(f_est, f_prev, dt, gain, f_max, rate_max):
 def estimate_tip_force(data, ex: exc.Excavator = exc.Excavator(), payload: float = 0.0, f_motion: float = F_MOTION,
                        tau_est: float = 0.004, rest_weight: float = 0.3, stop_weight: float = 0.02, P_atm=None,
                        cannot_tell: bool = False, v_info: float = 1e-3, f_info: float = 3.0,
-                       f_motion_swing: float = F_MOTION_SWING):
+                       f_motion_swing: float = F_MOTION_SWING, bounds: bool = False, band_slide=BAND_SLIDE,
+                       band_rate: float = BAND_RATE, f_bound: float = F_BOUND, t_hold: float = T_HOLD):
     """The observer run over an excavator recording (a DataFrame with its columns,
     pressures gauge): arrays ``f`` (n, 3) [N] and ``residual`` (n,) [N m].
 
     ``cannot_tell``: ``f`` from the sliding joints alone (``state["f_known"]``, see
     :func:`tip_force_determined`), ``nan`` where they do not determine a component,
-    and a third array, the number of informative joints per sample."""
+    and a third array, the number of informative joints per sample.
+
+    ``bounds``: ``(f, residual, f_lo, f_hi)``, the last two (n, 3) [N], per sample
+    and world axis the interval of tip forces consistent with the recording within
+    its noise (``observer_step``'s ``state["f_lo"]``, ``state["f_hi"]``; a side at
+    ``+-f_bound`` is open: a stop or a sticking joint leaves it unbounded)."""
     P_atm = ex.P_atm if P_atm is None else P_atm
     t = data["t"].to_numpy(float)
     Q = np.column_stack([data[f"angle_{j}"].to_numpy(float) for j in exc.JOINTS])
@@ -262,11 +376,53 @@ def estimate_tip_force(data, ex: exc.Excavator = exc.Excavator(), payload: float
     res = np.zeros(len(t))
     f_known = np.full((len(t), 3), np.nan)
     n_info = np.zeros(len(t), int)
+    f_lo, f_hi = np.full((len(t), 3), -float(f_bound)), np.full((len(t), 3), float(f_bound))
     for k in range(1, len(t)):
         state, f[k], res[k], _ = observer_step(state, Q[k], PA[k], PB[k], t[k] - t[k - 1], omega, ex, payload,
-                                               tau_est, rest_weight, stop_weight, v_info, f_info)
+                                               tau_est, rest_weight, stop_weight, v_info, f_info, band_slide,
+                                               band_rate, f_bound, t_hold)
         f_known[k] = state["f_known"]
         n_info[k] = int(np.sum(state["informative"]))
+        f_lo[k], f_hi[k] = state["f_lo"], state["f_hi"]
+    if bounds:
+        return f, res, f_lo, f_hi
     if cannot_tell:
         return f_known, res, n_info
     return f, res
+
+
+def tip_force_figures(t, f_true, f_est, f_lo=None, f_hi=None, max_lag: float = 0.2) -> dict:
+    """The tip force estimate's figures over the contact samples only (those where the
+    true force ``f_true`` (n, 3) [N] is not zero), as the benchmarks report them:
+    ``rmse`` [N] per axis, ``peak`` [N] the true force's largest magnitude,
+    ``rmse_share`` each axis' RMSE over that peak, ``delay`` [s] per axis the shift of
+    the estimate behind the truth that correlates them best over the contact samples
+    (up to ``max_lag``; 0 where an axis' true force does not vary), and with the bounds ``f_lo``, ``f_hi`` (n, 3): ``coverage`` per axis
+    and ``coverage_all`` (the share of contact samples where the true force lies
+    within the interval, per axis and on all three at once), ``median_width`` [N] per
+    axis.  ValueError without contact samples."""
+    t = np.asarray(t, float)
+    f_true, f_est = np.asarray(f_true, float), np.asarray(f_est, float)
+    on = np.linalg.norm(f_true, axis=1) > 0.0
+    if not on.any():
+        raise ValueError("no contact samples: the true tip force is zero throughout")
+    peak = float(np.max(np.linalg.norm(f_true[on], axis=1)))
+    rmse = np.sqrt(np.mean((f_est[on] - f_true[on]) ** 2, axis=0))
+    dt = float(np.median(np.diff(t)))
+    idx = np.flatnonzero(on)
+    delay, best = np.zeros(3), np.full(3, -np.inf)
+    for lag in range(0, int(round(max_lag / dt)) + 1):
+        k = idx[idx + lag < len(t)]
+        a = f_est[k + lag] - f_est[k + lag].mean(axis=0)
+        b = f_true[k] - f_true[k].mean(axis=0)
+        norm = np.sqrt(np.sum(a * a, axis=0) * np.sum(b * b, axis=0))
+        corr = np.where(norm > 0, np.sum(a * b, axis=0) / np.where(norm > 0, norm, 1.0), -np.inf)
+        better = corr > best
+        best, delay = np.where(better, corr, best), np.where(better, lag * dt, delay)
+    out = {"contact_samples": int(on.sum()), "peak": peak, "rmse": rmse, "rmse_share": rmse / peak, "delay": delay}
+    if f_lo is not None:
+        lo, hi = np.asarray(f_lo, float)[on], np.asarray(f_hi, float)[on]
+        inside = (f_true[on] >= lo) & (f_true[on] <= hi)
+        out.update(coverage=inside.mean(axis=0), coverage_all=float(np.all(inside, axis=1).mean()),
+                   median_width=np.median(hi - lo, axis=0))
+    return out

@@ -352,13 +352,21 @@ def run_excavator_offline(config, command, duration: float, dt: float = 1e-3) ->
     ``command(t) -> {"u_<joint>": V}`` (e.g. ``experiments.digging_cycle()``) for
     ``duration`` seconds; one row per sample, t0 included, in :data:`COLUMNS`: the
     excavator recording's columns (the sample measured at t and the commands applied
-    from t on) plus the true tip force, x and v per joint."""
+    from t on) plus the true tip force, x and v per joint.
+
+    A closed-loop profile (``command.closed_loop`` true, e.g.
+    :class:`boomfmi.experiments.JointTrajectoryController`) is called as
+    ``command(t, angles)`` with the joint angles measured at ``t`` (noise and ADC
+    included): a controller that is part of the experiment, as an operator is."""
     plant = ExcavatorRig(config)
     n = int(round(duration / dt))
     rows = np.empty((n + 1, len(COLUMNS)))
     s = plant.measure()
+    closed = bool(getattr(command, "closed_loop", False))
+    if closed and hasattr(command, "reset"):
+        command.reset()
     for k in range(n + 1):
-        u = commands(command(k * dt))
+        u = commands(command(k * dt, s.angle) if closed else command(k * dt))
         rows[k] = sample_row(s, u)
         if k < n:
             s = plant.step(u, dt)

@@ -31,7 +31,9 @@ receive buffer was full (``SO_RXQ_OVFL``, Linux).  No unauthenticated datagram o
 keeps or evicts a session or steps the rig.  **Watchdog**:
 when no valid command has arrived for ``watchdog`` seconds (50 ms by default, wall
 clock) the rig centres the valve (5 V) and reports the fail-safe state in every sample
-until commands resume.
+until commands resume; it engages only after a command (an idle rig is not in
+fail-safe), so a clean run enters it once, after its last command.  A session opened
+on an idle lockstep rig starts the plant from its initial state (``_restart``).
 
 With ``record`` the rig writes every sample it measures in the recording format, plus
 ``f_ext`` (the true external force), ``x`` (the true position) and ``failsafe``, row by
@@ -82,6 +84,7 @@ class Counters:
     overflowed: int = 0             #: datagrams the kernel dropped, the receive buffer full
     held_steps: int = 0             #: lockstep steps taken for lost commands
     failsafe_entries: int = 0
+    restarts: int = 0               #: lockstep runs that restarted the plant from its initial state
     missed_ticks: int = 0
     #: session number -> its SequenceGuard, at most MAX_SESSIONS, least recently used first
     sessions: OrderedDict = field(default_factory=OrderedDict)
@@ -99,7 +102,9 @@ class Counters:
                 f"{self.rejected_open} stale opens; {self.refused_open} opens refused (every session active); "
                 f"{self.overflowed} lost in a full receive buffer; "
                 f"{self.held_steps} lockstep steps held for lost commands; "
-                f"fail-safe entered {self.failsafe_entries} times; {self.missed_ticks} ticks missed")
+                f"{self.restarts} lockstep runs started from the initial state; "
+                f"fail-safe entered {self.failsafe_entries} times (once after each run's last command: "
+                f"its driver stopped, the valve centred); {self.missed_ticks} ticks missed")
 
 
 class RigServer:
@@ -129,6 +134,13 @@ class RigServer:
         self.session_wall: dict = {}             # per session: when it last had a datagram accepted
         self.opens = OpenGuard()
         self.failsafe = False
+        #: a command has come since the rig started or its watchdog last engaged: only
+        #: then is there a driver whose silence the watchdog answers (an idle rig, its
+        #: valve centred, is not in fail-safe)
+        self.driven = False
+        #: added to the plant's time in the rig's own recording: a lockstep run that
+        #: restarts the plant (``_restart``) continues the file's time
+        self.t_offset = 0.0
         self.seq = 0
         self.sample = plant.measure()
         if self.excavator:
@@ -148,13 +160,16 @@ class RigServer:
         if self.writer:
             if self.excavator:
                 from .excavator import sample_row
-                self.writer.write((*sample_row(s, u), float(self.failsafe)))
+                row = [*sample_row(s, u), float(self.failsafe)]
             else:
-                self.writer.write((s.t, u, s.p_a, s.p_b, s.alpha, s.f_ext, s.x, float(self.failsafe)))
+                row = [s.t, u, s.p_a, s.p_b, s.alpha, s.f_ext, s.x, float(self.failsafe)]
+            row[0] += self.t_offset
+            self.writer.write(row)
 
     def _watchdog(self, now: float) -> None:
-        if not self.failsafe and now - self.last_command_wall > self.watchdog:
+        if self.driven and not self.failsafe and now - self.last_command_wall > self.watchdog:
             self.failsafe = True
+            self.driven = False
             self.counters.failsafe_entries += 1
 
     def _advance(self, dt: float | None = None) -> None:
@@ -201,6 +216,23 @@ class RigServer:
         missed = round((msg.t - last[0] - last[1]) / msg.dt)
         return (missed if 0 < missed <= MAX_HELD_STEPS else 0), 1
 
+    def _restart(self) -> None:
+        """A session opened on an idle lockstep rig (no command since it started or its
+        watchdog engaged) starts the plant from its initial state at rig time 0, out of
+        fail-safe, as a run of the model would: a second ``record`` does not continue
+        where the first left off.  A session opened while another drives the rig (a
+        monitor) changes nothing.  The rig's own recording goes on in time
+        (``t_offset``)."""
+        self.failsafe = False
+        if self.plant.t == 0.0:
+            return
+        self._record(self.sample, self.centre)                   # the last state, before the restart
+        self.t_offset += self.plant.t + self.dt
+        self.plant.reset()
+        self.sample = self.plant.measure()
+        self.u_cmd = self.centre
+        self.counters.restarts += 1
+
     def _reply(self, addr, echo: int, session: int) -> None:
         s = self.sample
         self.seq += 1
@@ -241,6 +273,8 @@ class RigServer:
             session = self._open()
             if not session:
                 return
+            if self.lockstep and not self.driven:
+                self._restart()
             self.session_wall[session] = time.perf_counter()
         guard = c.sessions.get(session)
         if guard is None:
@@ -266,6 +300,7 @@ class RigServer:
             self.u_cmd = min(max(msg.u, reference_rig.u_min), reference_rig.u_max)
         self.last_command_wall = time.perf_counter()
         self.failsafe = False
+        self.driven = True
         if stepped:
             self._advance(msg.dt)
             self.last_command_t[session] = (msg.t, msg.dt)

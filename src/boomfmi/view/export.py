@@ -247,10 +247,13 @@ class ExcavatorDrawing(_Figure):
                                      per_joint("p_a", _bar)))
         self.plots.append(self._plot(self.grid[2, 1], "p_b [bar gauge] per joint: machine, model dashed",
                                      per_joint("p_b", _bar)))
-        self.plots.append(self._plot(self.grid[3, 1], "tip force [N] x, y, z: estimated, truth dashed",
-                                     [(lambda f, key=key, k=k: f[key][k] if f[key] else None, AXIS_COLORS[k], ls)
-                                      for k in range(3) for key, ls in (("f_tip_est", "-"), ("f_tip", "--"))]))
-        for p, labels, step in ((self.plots[0], joints, 1), (self.plots[3], "xyz", 2)):   # the machine's / estimate's
+        self.plots.append(self._plot(self.grid[3, 1], "tip force [N] x, y, z: estimated, truth dashed, "
+                                                      "interval dotted",
+                                     [(lambda f, key=key, k=k: f.get(key)[k] if f.get(key) else None, AXIS_COLORS[k],
+                                       ls) for k in range(3) for key, ls in (("f_tip_est", "-"), ("f_tip", "--"),
+                                                                             ("f_tip_lo", ":"), ("f_tip_hi", ":"))]))
+        for p, labels, step in (*((self.plots[i], joints, 1) for i in range(3)),     # the machine's / estimate's
+                                (self.plots[3], "xyz", 4)):
             for (_, line), label in zip(p["lines"][::step], labels):
                 line.set_label(label)
             p["ax"].legend(loc="upper left", fontsize=6, ncol=len(labels), frameon=False, labelcolor="#d9dee7",
@@ -333,12 +336,17 @@ def _bar(p):
 
 
 def export(replay, out, fps: float = 25.0, start: float | None = None, stop: float | None = None,
-           size: str = "1280x720") -> tuple[Path, int]:
+           size: str = "1280x720", history: float | None = None) -> tuple[Path, int]:
     """Render the run file ``replay`` (the boom's or the excavator's) to ``out`` (.mp4 or
     .gif) at ``fps`` frames per second of the run's time, from ``start`` to ``stop`` [s]
-    (default: all of it); return the path and the number of frames."""
+    (default: all of it); return the path and the number of frames.  The plots of the
+    first frame show the ``history`` seconds before ``start`` (default the plots' WINDOW,
+    as the page does; 0: none), sampled at ``fps``."""
     if not 1 <= fps <= 120:
         raise ValueError(f"--fps {fps:g}: from 1 to 120 frames per second")
+    history = WINDOW if history is None else float(history)
+    if not (math.isfinite(history) and history >= 0):
+        raise ValueError(f"--history {history:g}: seconds before --start, a finite number >= 0")
     out = Path(out)
     writer = _writer(out, fps)
     width, height = _size(size)
@@ -350,6 +358,8 @@ def export(replay, out, fps: float = 25.0, start: float | None = None, stop: flo
                          f"{run.t[0]:g} to {run.t[-1]:g} s)")
     times = np.arange(t0, t1 + 1e-9, 1.0 / fps)
     drawing = (ExcavatorDrawing if run.kind == "excavator" else Drawing)(run, width, height)
+    for t in np.arange(max(t0 - min(history, WINDOW), run.t[0]), t0 - 0.5 / fps, 1.0 / fps):
+        drawing._update_plots(run.frame(float(t)))   # the plots' past: drawn, not a frame of the video
     out.parent.mkdir(parents=True, exist_ok=True)
     import matplotlib.pyplot as plt
     try:

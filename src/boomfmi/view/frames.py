@@ -35,6 +35,7 @@ import pandas as pd
 
 from ..physics import Cylinder, Geometry, linkage_points, x_from_alpha
 from ..physics import excavator
+from ..physics.excavator_force import F_BOUND
 from ..physics import reference_rig
 from ..recording import read_recording
 
@@ -183,7 +184,8 @@ def live_frame(sample: dict, geom: Geometry) -> dict:
 # optionally the true tip force ``f_tip_x/y/z``; or a model's run beside the machine,
 # the model's columns unsuffixed and the machine's suffixed ``_measured``
 # (``angle_<j>_measured``, ``p_a_<j>_measured``...), as the boom's teleoperation run,
-# with the estimated tip force ``f_tip_est_x/y/z`` (and the reflected ``f_reflect_x/y/z``).
+# with the estimated tip force ``f_tip_est_x/y/z`` (and the reflected ``f_reflect_x/y/z``)
+# and its interval ``f_tip_lo_x/y/z``, ``f_tip_hi_x/y/z`` (``boomfmi view --model``).
 #
 # Its frame:
 #
@@ -191,7 +193,8 @@ def live_frame(sample: dict, geom: Geometry) -> dict:
 #      "machine": {"angle": {joint: rad}, "p_a": {joint: Pa gauge}, "p_b": {...},
 #                  "points": {name: [x, y, z] m}},
 #      "model": {... the same ...} or None,
-#      "f_tip": [N, N, N] or None, "f_tip_est": [...] or None, "f_reflect": [...] or None}
+#      "f_tip": [N, N, N] or None, "f_tip_est": [...] or None, "f_reflect": [...] or None,
+#      "f_tip_lo": [N or None per axis] or None, "f_tip_hi": [...] or None}
 #
 # ``points`` are ``physics.excavator.forward_kinematics``'s, in the world frame (z up):
 # the swing axis at the ground, the boom, arm and bucket pivots, the tip and each
@@ -201,6 +204,11 @@ EXCAVATOR_POSTURE = ("angle", "p_a", "p_b")
 TIP_FORCES = {"f_tip": "f_tip", "f_tip_est": "f_tip_est", "f_reflect": "f_reflect"}
 #: m of arrow per N of tip force, on the page
 TIP_FORCE_SCALE = 0.25 / 50.0
+#: the interval of the estimated tip force per axis (``f_tip_lo_<a>``, ``f_tip_hi_<a>``,
+#: ``physics.excavator_force``): frame key -> the run's column prefix.  A side at
+#: ``+-excavator_force.F_BOUND`` or beyond is open (a stop or a sticking joint leaves
+#: it unbounded) and is sent as None, per axis.
+TIP_BOUNDS = {"f_tip_lo": "f_tip_lo", "f_tip_hi": "f_tip_hi"}
 
 
 def heading(p: dict) -> float:
@@ -284,7 +292,7 @@ class ExcavatorRun:
     """An excavator run's columns as arrays: ``machine`` and ``model`` map
     EXCAVATOR_POSTURE names to (n, 4) arrays in ``excavator.JOINTS`` order (``model`` is
     None for a recording of the machine alone); ``forces`` maps the TIP_FORCES present
-    to (n, 3) arrays."""
+    to (n, 3) arrays, and the TIP_BOUNDS present (an open side nan)."""
     path: Path
     t: np.ndarray
     machine: dict
@@ -324,6 +332,7 @@ class ExcavatorRun:
         for k, v in forces.items():
             if v is not None and any(c is None for c in v):
                 forces[k] = None
+        forces.update({k: (at(self.forces[k]) if k in self.forces else None) for k in TIP_BOUNDS})
         return {"type": "frame", "kind": "excavator", "t": t, "machine": posture(self.machine),
                 "model": posture(self.model) if self.model is not None else None, **forces}
 
@@ -353,7 +362,7 @@ def load_excavator_run(rec) -> ExcavatorRun:
     else:
         machine, model = posture(""), None
     forces = {}
-    for key, prefix in TIP_FORCES.items():
+    for key, prefix in {**TIP_FORCES, **TIP_BOUNDS}.items():
         cols = [f"{prefix}_{a}" for a in "xyz"]
         present = [c for c in cols if c in d]
         if present and len(present) < 3:
@@ -366,6 +375,8 @@ def load_excavator_run(rec) -> ExcavatorRun:
                 from ..recording import RecordingError
                 raise RecordingError(rec.path, "a tip force must be numbers", row=1, column=cols[0])
             forces[key] = vals.astype(float)
+            if key in TIP_BOUNDS:                 # an open side: no bound to draw
+                forces[key][np.abs(forces[key]) >= F_BOUND] = np.nan
     q0 = machine["angle"][0]
     try:
         angle_map = excavator_angle_map(q0)
@@ -397,6 +408,10 @@ def live_excavator_frame(sample: dict) -> dict:
     for key, prefix in TIP_FORCES.items():
         v = [sample.get(f"{prefix}_{a}") for a in "xyz"]
         forces[key] = None if any(c is None for c in v) else [float(c) for c in v]
+    for key, prefix in TIP_BOUNDS.items():                 # per axis; an open side None
+        v = [sample.get(f"{prefix}_{a}") for a in "xyz"]
+        forces[key] = (None if all(c is None for c in v) else
+                       [float(c) if c is not None and abs(float(c)) < F_BOUND else None for c in v])
     return {"type": "frame", "kind": "excavator", "t": float(sample.get("t", 0.0)), "machine": machine,
             "model": model, **forces}
 

@@ -280,6 +280,28 @@ function tipArrow(a, f, tip, side) {
   return length;
 }
 
+// The interval of the estimated tip force (per axis, f_tip_lo to f_tip_hi) as a box
+// around the estimate's arrow: the tails, at the page's force scale with the head
+// fixed, of the arrows of every force in the interval.  A side reaches at most
+// INTERVAL_REACH N beyond the estimate; an open side (null: a stop or a sticking joint
+// leaves it unbounded) or one beyond that is drawn there and reported as open.
+const INTERVAL_REACH = 100;
+function intervalBox(box, arrow, f, lo, hi) {
+  if (!arrow.visible || !f || !lo || !hi) { box.visible = false; box.userData = {}; return; }
+  const scale = three.geo.force_scale, H = arrow.userData.headAt, min = [], max = [], open = [];
+  const given = (v) => v !== null && v !== undefined;
+  for (let k = 0; k < 3; k++) {
+    const a = given(lo[k]) ? Math.max(lo[k], f[k] - INTERVAL_REACH) : f[k] - INTERVAL_REACH;
+    const b = given(hi[k]) ? Math.min(hi[k], f[k] + INTERVAL_REACH) : f[k] + INTERVAL_REACH;
+    open.push([a !== lo[k], b !== hi[k]]);
+    min.push(H[k] - b * scale); max.push(H[k] - a * scale);
+  }
+  box.scale.set(...[0, 1, 2].map((k) => Math.max(max[k] - min[k], 0.002)));
+  box.position.set(...[0, 1, 2].map((k) => (min[k] + max[k]) / 2));
+  box.visible = true;
+  box.userData = { min, max, open };
+}
+
 function buildExcavatorScene(g) {
   three.geo = g;
   const scene = new THREE.Scene();
@@ -301,7 +323,10 @@ function buildExcavatorScene(g) {
   three.fEst = solidArrow(COLORS.force);
   three.fExt = solidArrow(COLORS.truth);
   three.fEst.visible = three.fExt.visible = false;
-  scene.add(three.fEst, three.fExt);
+  three.fBox = new THREE.LineSegments(new THREE.EdgesGeometry(new THREE.BoxGeometry(1, 1, 1)),
+                                      new THREE.LineBasicMaterial({ color: COLORS.force, transparent: true, opacity: 0.7 }));
+  three.fBox.visible = false;
+  scene.add(three.fEst, three.fExt, three.fBox);
   three.scene = scene;
   const host = $('scene');
   three.camera = new THREE.PerspectiveCamera(40, host.clientWidth / Math.max(1, host.clientHeight), 0.01, 30);
@@ -318,6 +343,7 @@ function showExcavator(f) {
   const side = new THREE.Vector3(-Math.sin(h), Math.cos(h), 0).multiplyScalar(0.03);   // across the plane
   tipArrow(three.fEst, f.f_tip_est, tip, side);
   tipArrow(three.fExt, f.f_tip, tip, side.clone().negate());
+  intervalBox(three.fBox, three.fEst, f.f_tip_est, f.f_tip_lo, f.f_tip_hi);
   three.dirty = true;
   const deg = (a) => (a === null || a === undefined ? '   -  ' : (a * 180 / Math.PI).toFixed(2).padStart(7));
   const vec = (v) => (v ? v.map((c) => c.toFixed(1).padStart(6)).join(' ') : '   -');
@@ -339,6 +365,9 @@ function excavatorState() {
     ghostAngles: gh.group.visible ? excavatorAngles(gh) : null, ghostVisible: gh.group.visible,
     tip: last && last.machine && last.machine.points ? last.machine.points.tip : null,
     arrowEst: arrowOf(three.fEst), arrowTruth: arrowOf(three.fExt),
+    intervalBox: { visible: three.fBox.visible, min: three.fBox.userData.min || null,
+                   max: three.fBox.userData.max || null, open: three.fBox.userData.open || null },
+    fTipLo: last ? last.f_tip_lo || null : null, fTipHi: last ? last.f_tip_hi || null : null,
     arrowLength: three.fEst.visible ? three.fEst.userData.length : 0,
     fTipEst: last ? last.f_tip_est : null, fTip: last ? last.f_tip : null,
   };
@@ -371,6 +400,7 @@ const BOOM_PLOTS = [
                                             ['f_ext (truth)', COLORS.truth, (f) => f.f_ext, true]] },
 ];
 const JOINT_COLORS = { swing: 0xc792ea, boom: 0xf0a030, arm: 0x7fd17f, bucket: 0x5ad8e6 };
+const AXIS_COLORS = [0xff4d5e, 0x7fd17f, 0x5ab0ff];            // the tip force's x, y, z
 const EXCAVATOR_JOINTS = ['swing', 'boom', 'arm', 'bucket'];
 const rad2deg = (a) => (a === null || a === undefined ? null : a * 180 / Math.PI);
 const perJoint = (what, conv, model) => EXCAVATOR_JOINTS.map((j) => [`${j}${model ? ' model' : ''}`, JOINT_COLORS[j],
@@ -379,9 +409,11 @@ const EXCAVATOR_PLOTS = [
   { title: 'joint angles [deg]: machine, model dashed', series: [...perJoint('angle', rad2deg, false), ...perJoint('angle', rad2deg, true)] },
   { title: 'p_a [bar gauge] per joint: machine, model dashed', series: [...perJoint('p_a', (p) => bar(p), false), ...perJoint('p_a', (p) => bar(p), true)] },
   { title: 'p_b [bar gauge] per joint: machine, model dashed', series: [...perJoint('p_b', (p) => bar(p), false), ...perJoint('p_b', (p) => bar(p), true)] },
-  { title: 'tip force [N] x, y, z: estimated, truth dashed', series: [0, 1, 2].flatMap((k) => [
-    [`f_tip_est ${'xyz'[k]}`, [0xff4d5e, 0x7fd17f, 0x5ab0ff][k], (f) => (f.f_tip_est ? f.f_tip_est[k] : null)],
-    [`f_tip ${'xyz'[k]}`, [0xff4d5e, 0x7fd17f, 0x5ab0ff][k], (f) => (f.f_tip ? f.f_tip[k] : null), true]]) },
+  { title: 'tip force [N]: estimated, truth dashed, interval shaded', series: [0, 1, 2].flatMap((k) => [
+    [`est ${'xyz'[k]}`, AXIS_COLORS[k], (f) => (f.f_tip_est ? f.f_tip_est[k] : null)],
+    [`truth ${'xyz'[k]}`, AXIS_COLORS[k], (f) => (f.f_tip ? f.f_tip[k] : null), true],
+    [`${'xyz'[k]} low`, AXIS_COLORS[k], (f) => (f.f_tip_lo ? f.f_tip_lo[k] : null), false, 'lo'],
+    [`${'xyz'[k]} high`, AXIS_COLORS[k], (f) => (f.f_tip_hi ? f.f_tip_hi[k] : null), false, 'hi']]) },
 ];
 let PLOTS = BOOM_PLOTS;
 function bar(p) { return p === null || p === undefined ? null : p / 1e5; }
@@ -392,6 +424,7 @@ const plots = { charts: [], data: [], dirty: false };
 function buildPlots(kind) {
   PLOTS = kind === 'excavator' ? EXCAVATOR_PLOTS : BOOM_PLOTS;
   plots.kind = kind || 'boom';
+  $('legend').querySelector('.band').hidden = plots.kind !== 'excavator';   // the tip force's interval
   const host = $('plots');
   host.innerHTML = '';
   plots.charts = []; plots.data = [];
@@ -399,12 +432,19 @@ function buildPlots(kind) {
     const div = document.createElement('div');
     div.className = 'plot';
     host.appendChild(div);
+    // every colour named in the plot's legend (live: false, the labels only); an
+    // interval's low and high lines thin and faint, the band between them shaded
+    const bands = [];
+    p.series.forEach(([, color, , , role], j) => {
+      if (role === 'hi') bands.push({ series: [j + 1, j], fill: hex(color) + '33' });
+    });
     const opts = {
-      title: p.title, width: Math.max(200, div.clientWidth), height: Math.max(80, div.clientHeight - 10),
-      scales: { x: { time: false } }, legend: { show: false },
+      title: p.title, width: Math.max(200, div.clientWidth), height: 80,
+      scales: { x: { time: false } }, legend: { show: true, live: false }, bands,
       axes: [{ stroke: '#8a93a3', grid: { stroke: '#2a3039' } }, { stroke: '#8a93a3', grid: { stroke: '#2a3039' }, size: 50 }],
-      series: [{ label: 't [s]' }, ...p.series.map(([label, color, , dashed]) => ({
-        label, stroke: hex(color), width: 1.5, dash: dashed ? [6, 4] : undefined, spanGaps: false,
+      series: [{ label: 't [s]' }, ...p.series.map(([label, color, , dashed, role]) => ({
+        label, stroke: role ? hex(color) + '66' : hex(color), width: role ? 0.75 : 1.5,
+        dash: dashed ? [6, 4] : undefined, spanGaps: false,
       }))],
     };
     const data = [[], ...p.series.map(() => [])];
@@ -540,7 +580,13 @@ function resize() {
     three.dirty = true;
   }
   document.querySelectorAll('#plots .plot').forEach((div, i) => {
-    if (plots.charts[i]) plots.charts[i].setSize({ width: div.clientWidth, height: Math.max(80, div.clientHeight - 10) });
+    const c = plots.charts[i];
+    if (!c) return;
+    // the chart's canvas (its axes and their labels) gets what its box leaves beside the
+    // title and the legend: nothing spills into the plot below
+    const title = c.root.querySelector('.u-title'), legend = c.root.querySelector('.u-legend');
+    const rest = (title ? title.offsetHeight : 0) + (legend ? legend.offsetHeight : 0) + 4;
+    c.setSize({ width: div.clientWidth, height: Math.max(40, div.clientHeight - rest) });
   });
 }
 window.addEventListener('resize', resize);
