@@ -163,3 +163,21 @@ def test_rebuilding_one_fmu_repacks_the_ssps_that_carry_it(clean_build, tmp_path
     assert alone.returncode == 0, alone.stderr
     assert not (tmp_path / "teleoperation.ssp").exists()
     assert "not packed" in alone.stdout and "boom_load, cylinder, force_estimator, valve not built yet" in alone.stdout
+
+
+def test_a_build_after_an_fmu_ran_in_this_process_uses_the_installed_pythonfmu(fmu_dir, tmp_path):
+    """An FMU instantiated in this process puts its own resources/ (with its copy of the
+    pythonfmu package and its bundle) first on sys.path: a build after it packed no
+    binary ("pythonfmu wrote no binaries/linux64/valve.so"). It builds, and the running
+    FMU's modules are left to it."""
+    import sys
+
+    from fmpy import simulate_fmu
+
+    from boomfmi.fmubuild import build_fmu
+    simulate_fmu(str(fmu_dir / "valve.fmu"), stop_time=0.002, step_size=1e-3)
+    before = {m: id(sys.modules[m]) for m in sys.modules if m.startswith(("pythonfmu", "boomfmi_valve"))}
+    built = build_fmu(Path(__file__).resolve().parents[1] / "fmus" / "valve", tmp_path)
+    assert built.is_file()
+    assert {m: id(sys.modules[m]) for m in sys.modules if m.startswith(("pythonfmu", "boomfmi_valve"))} == before
+    simulate_fmu(str(built), stop_time=0.002, step_size=1e-3)

@@ -14,7 +14,6 @@ import importlib.util
 import os
 import re
 import shutil
-import subprocess
 import sys
 import zipfile
 from pathlib import Path
@@ -53,30 +52,20 @@ def portable_dir(tmp_path_factory):
     return tmp_path_factory.mktemp("portable")
 
 
-def build_portable(names, out: Path) -> None:
-    """Build FMUs ``names`` portable (numpy inside for linux64; no download needed) into
-    ``out``, in a fresh interpreter as ``build_fmus.py`` does: a build inside this test
-    process would import the FMU scripts beside whatever the earlier tests imported."""
-    code = ("import sys; from pathlib import Path; from boomfmi.fmubuild import build_fmu\n"
-            "for n in sys.argv[3:]:\n"
-            "    build_fmu(Path(sys.argv[1]) / n, Path(sys.argv[2]), portable=('linux64',))\n")
-    proc = subprocess.run([sys.executable, "-c", code, str(ROOT / "fmus"), str(out), *names], capture_output=True, text=True,
-                          timeout=300)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-
-
 @pytest.fixture(scope="module")
 def portable_valve(portable_dir):
     """The valve built portable (numpy inside for linux64; no download needed)."""
-    build_portable(["valve"], portable_dir / "fmus")
-    return portable_dir / "fmus" / "valve.fmu"
+    from boomfmi.fmubuild import build_fmu
+    return build_fmu(ROOT / "fmus" / "valve", portable_dir / "fmus", portable=("linux64",))
 
 
 @pytest.fixture(scope="module")
 def portable_ssp(portable_valve, portable_dir):
     """The boom's SSP packed from portable FMUs."""
+    from boomfmi.fmubuild import build_fmu
     from boomfmi.fmubuild.ssp import pack_ssp
-    build_portable(["cylinder", "boom_load"], portable_dir / "fmus")
+    for name in ("cylinder", "boom_load"):
+        build_fmu(ROOT / "fmus" / name, portable_dir / "fmus", portable=("linux64",))
     return pack_ssp(ROOT / "ssp" / "SystemStructure.ssd", portable_dir / "fmus", portable_dir / "excavator_boom.ssp")
 
 

@@ -29,6 +29,7 @@ version and packages it needs (``resources/boomfmi_requirements.txt``, checked b
 """
 from __future__ import annotations
 
+import contextlib
 import importlib
 import os
 import shutil
@@ -485,6 +486,42 @@ def _rewrite(fmu: Path, model_description: bytes, model_identifier: str, shim,
     tmp.replace(fmu)
 
 
+@contextlib.contextmanager
+def _installed_pythonfmu():
+    """Within: ``import pythonfmu`` is the installed pythonfmu; yields its ``FmuBuilder``
+    and ``get_model_class``.
+
+    An FMU made by pythonfmu carries a copy of the ``pythonfmu`` package in its
+    ``resources/``, and pythonfmu's C wrapper puts that folder first on ``sys.path`` when
+    the FMU is instantiated in this process (fmpy does so).  Imported after that, the
+    builder would be the FMU's copy, which has no binaries to pack (the build failed
+    with "pythonfmu wrote no binaries/linux64/NAME.so").  Build with the installed one,
+    then leave the FMU's modules as they were for the FMU still running."""
+    from importlib.metadata import PackageNotFoundError, distribution
+    try:
+        home = Path(distribution("pythonfmu").locate_file("pythonfmu")).resolve()
+    except PackageNotFoundError:
+        raise BuildError("pythonfmu is not installed: pip install 'pythonfmu>=0.7,<0.8'") from None
+    loaded = sys.modules.get("pythonfmu")
+    if loaded is None or Path(loaded.__file__).resolve().parent == home:
+        from pythonfmu.builder import FmuBuilder, get_model_class
+        yield FmuBuilder, get_model_class
+        return
+
+    def ours(m):
+        return m == "pythonfmu" or m.startswith("pythonfmu.")
+    theirs = {m: sys.modules.pop(m) for m in list(sys.modules) if ours(m)}
+    sys.path.insert(0, str(home.parent))
+    try:
+        from pythonfmu.builder import FmuBuilder, get_model_class
+        yield FmuBuilder, get_model_class
+    finally:
+        sys.path.remove(str(home.parent))
+        for m in [m for m in sys.modules if ours(m)]:
+            del sys.modules[m]
+        sys.modules.update(theirs)
+
+
 def build_fmu(fmu_dir: Path, out_dir: Path, portable: bool | tuple[str, ...] = False) -> Path:
     """Build ``fmus/<name>`` into ``out_dir/<name>.fmu``; return its path.
 
@@ -493,8 +530,6 @@ def build_fmu(fmu_dir: Path, out_dir: Path, portable: bool | tuple[str, ...] = F
     ``portable`` also puts those packages inside, for each platform it has binaries for
     (or for the platforms it names), so that the host needs only a CPython runtime of
     the build's version."""
-    from pythonfmu.builder import FmuBuilder, get_model_class
-
     fmu_dir = Path(fmu_dir).resolve()
     out_dir = Path(out_dir).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -507,14 +542,20 @@ def build_fmu(fmu_dir: Path, out_dir: Path, portable: bool | tuple[str, ...] = F
         bundle = tmp / "stage" / bundle_name(name)
         # laid out as in the FMU's resources/, where the staged script's check looks for them
         packages = {p: portable_packages(p, tmp / "stage" / "python" / p) for p in platforms}
+        def staged(m):
+            return m == script.stem or m.startswith(bundle_name(name))
+        # an FMU of this name running in this process has its own modules of these names
+        running = {m: sys.modules.pop(m) for m in list(sys.modules) if staged(m)}
         sys.path.insert(0, str(script.parent))
         try:
-            FmuBuilder.build_FMU(script, dest=target, project_files=[bundle, script.parent / REQUIREMENTS_NAME])
-            cls = get_model_class(script)
+            with _installed_pythonfmu() as (FmuBuilder, get_model_class):
+                FmuBuilder.build_FMU(script, dest=target, project_files=[bundle, script.parent / REQUIREMENTS_NAME])
+                cls = get_model_class(script)
         finally:
             sys.path[:] = [p for p in sys.path if not p.startswith(str(script.parent))]
-            for mod in [m for m in sys.modules if m == script.stem or m.startswith(bundle_name(name))]:
+            for mod in [m for m in sys.modules if staged(m)]:
                 del sys.modules[mod]
+            sys.modules.update(running)
             importlib.invalidate_caches()
         with zipfile.ZipFile(target) as z:
             xml = z.read("modelDescription.xml")
