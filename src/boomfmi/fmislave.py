@@ -234,8 +234,8 @@ class BoomSlave(_FmiSlave):
         #: the fixed parameters, by value reference; the Real inputs, read at once by do_step
         parameters = {v.name for v in self.variables if v.causality == "parameter"}
         self._fixed = {vr: var.name for vr, var in self.vars.items() if var.name in parameters}
-        inputs = tuple(v.name for v in self.variables if v.causality == "input" and v.type == "Real")
-        self._inputs = _values_of(inputs)
+        self._input_names = tuple(v.name for v in self.variables if v.causality == "input" and v.type == "Real")
+        self._inputs = _values_of(self._input_names)
 
     # -- FMI 2.0 Real access, pythonfmu's semantics with the look-ups done once ---------
     # pythonfmu's get_real/set_real look every value reference up, check its type and go
@@ -324,9 +324,7 @@ class BoomSlave(_FmiSlave):
         """Log, as an error, the outputs among ``vrs`` that depend directly on an input
         that is not finite, naming both; False when there are none."""
         spec = {v.name: v for v in self.variables}
-        bad = {v.name: value for v, value in zip((v for v in self.variables if v.causality == "input"
-                                                   and v.type == "Real"), self._inputs(self))
-               if not math.isfinite(value)}
+        bad = self._inputs_not_finite()
         outputs = [self.vars[vr].name for vr in vrs
                    if set(getattr(spec.get(self.vars[vr].name), "depends", ())) & set(bad)]
         if not outputs:
@@ -342,14 +340,13 @@ class BoomSlave(_FmiSlave):
         non-finite inputs that made them; nothing when every value is finite."""
         bad = [f"{self.vars[vr].name} = {value!r}" for vr, value in zip(vrs, values) if not math.isfinite(value)]
         if bad:
-            inputs = self._inputs_not_finite()
+            inputs = [f"{n} = {value!r}" for n, value in self._inputs_not_finite().items()]
             self.log(f"{function}: {_are(bad, '')} not a finite number"
                      + (f" ({_are(inputs, 'input')} not finite)" if inputs else ""), Status.error)
 
-    def _inputs_not_finite(self) -> list:
-        """``["u = nan", "p_a = inf"]``: the Real inputs that are not finite."""
-        names = [v.name for v in self.variables if v.causality == "input" and v.type == "Real"]
-        return [f"{n} = {value!r}" for n, value in zip(names, self._inputs(self)) if not math.isfinite(value)]
+    def _inputs_not_finite(self) -> dict:
+        """``{"u": nan, "p_a": inf}``: the Real inputs that are not finite."""
+        return {n: value for n, value in zip(self._input_names, self._inputs(self)) if not math.isfinite(value)}
 
     def _real_names(self, vrs) -> Tuple[str, ...]:
         """The attribute names of Real variables ``vrs``; TypeError for another type, as
@@ -466,7 +463,7 @@ class BoomSlave(_FmiSlave):
                      Status.error)
             return _STEP_FAILED
         if not math.isfinite(sum(self._inputs(self))):  # finite inputs can overflow the sum
-            inputs = self._inputs_not_finite()
+            inputs = [f"{n} = {value!r}" for n, value in self._inputs_not_finite().items()]
             if inputs:
                 self.log(f"{_FMI}DoStep refused at t = {current_time:g} s: {_are(inputs, 'input')} not a "
                          "finite number; nothing was stepped (set a finite value and step again)", Status.error)

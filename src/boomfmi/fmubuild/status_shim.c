@@ -193,23 +193,27 @@ static FILE *open_text(const char *path) {
     return to_wide(path, wide, PATH_CHARS) ? _wfopen(wide, L"r") : NULL;
 }
 
-/* Py_IsInitialized of a Python already in this process, and the file that holds it. */
-static void *python_in_process(char *where, size_t size) {
+/* The module of this process that holds a Python runtime (Py_IsInitialized), or NULL. */
+static HMODULE python_module(void) {
     HMODULE modules[1024];
     DWORD needed = 0, i, count;
     if (!EnumProcessModules(GetCurrentProcess(), modules, sizeof modules, &needed)) return NULL;
     count = needed / sizeof(HMODULE);
     if (count > 1024) count = 1024;
     for (i = 0; i < count; i++) {
-        void *fn = (void *)GetProcAddress(modules[i], "Py_IsInitialized");
-        if (fn) {
-            wchar_t wide[PATH_CHARS];
-            where[0] = '\0';
-            if (GetModuleFileNameW(modules[i], wide, PATH_CHARS)) to_utf8(wide, where, (int)size);
-            return fn;
-        }
+        if (GetProcAddress(modules[i], "Py_IsInitialized")) return modules[i];
     }
     return NULL;
+}
+
+/* Py_IsInitialized of a Python already in this process, and the file that holds it. */
+static void *python_in_process(char *where, size_t size) {
+    HMODULE module = python_module();
+    wchar_t wide[PATH_CHARS];
+    if (!module) return NULL;
+    where[0] = '\0';
+    if (GetModuleFileNameW(module, wide, PATH_CHARS)) to_utf8(wide, where, (int)size);
+    return (void *)GetProcAddress(module, "Py_IsInitialized");
 }
 #else
 static int own_path(char *out, size_t size) {
@@ -372,15 +376,8 @@ static char start_failure[TEXT_CHARS];
 
 #ifdef _WIN32
 static void *runtime_symbol(const char *name) {
-    HMODULE modules[1024];
-    DWORD needed = 0, i, count;
-    if (!EnumProcessModules(GetCurrentProcess(), modules, sizeof modules, &needed)) return NULL;
-    count = needed / sizeof(HMODULE);
-    if (count > 1024) count = 1024;
-    for (i = 0; i < count; i++) {
-        if (GetProcAddress(modules[i], "Py_IsInitialized")) return (void *)GetProcAddress(modules[i], name);
-    }
-    return NULL;
+    HMODULE module = python_module();
+    return module ? (void *)GetProcAddress(module, name) : NULL;
 }
 #define SEP "\\"
 #define STDLIB_DIR "Lib%.0s"      /* the version is not part of it on Windows */

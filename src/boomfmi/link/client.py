@@ -134,18 +134,14 @@ class RigClient:
             except BadMac:
                 self.dropped["auth"] += 1
                 continue
-            if isinstance(msg, Challenge):
-                if nonce is None or msg.nonce != nonce or not msg.cookie:     # not ours, or late
-                    self.dropped["stale"] += 1
-                    continue
-                if not self.guard.accept(msg.seq):
-                    self.dropped["replay"] += 1
-                    continue
-                return msg
-            if not isinstance(msg, (SampleDatagram, ExcavatorSampleDatagram)):
+            if isinstance(msg, Challenge):       # ours: to a hello of this nonce, with a cookie
+                ours = nonce is not None and msg.nonce == nonce and bool(msg.cookie)
+            elif isinstance(msg, (SampleDatagram, ExcavatorSampleDatagram)):
+                ours = msg.echo in seqs and not (self.session and msg.session != self.session)
+            else:
                 self.dropped["malformed"] += 1
                 continue
-            if msg.echo not in seqs or (self.session and msg.session != self.session):
+            if not ours:                            # another request's, or late
                 self.dropped["stale"] += 1
                 continue
             if not self.guard.accept(msg.seq):
