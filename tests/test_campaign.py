@@ -175,17 +175,22 @@ def test_an_effect_flags_where_it_appears_or_grows_and_a_failed_date_is_skipped(
 
 # --- the engine ---------------------------------------------------------------------------
 
-@pytest.fixture(scope="module")
-def recordings(tmp_path_factory):
-    """Two short effect-free recordings of the virtual rig (fit and holdout)."""
+def fit_and_holdout(d: Path, duration: float) -> Path:
+    """Two short effect-free recordings of the virtual rig in ``d``: ``fit.csv`` and
+    ``hold.csv``, each ``duration`` [s] of random steps."""
     from boomfmi.experiments import random_steps
     from boomfmi.recording import write_recording
     from boomfmi.rig.offline import run_offline
-    d = tmp_path_factory.mktemp("rec")
-    fit, hold = random_steps(3, duration=4.0), random_steps(4, duration=4.0)
+    fit, hold = random_steps(3, duration=duration), random_steps(4, duration=duration)
     write_recording(d / "fit.csv", run_offline({"seed": 5}, fit, fit.duration))
     write_recording(d / "hold.csv", run_offline({"seed": 6}, hold, hold.duration))
     return d
+
+
+@pytest.fixture(scope="module")
+def recordings(tmp_path_factory):
+    """Two short effect-free recordings of the virtual rig (fit and holdout)."""
+    return fit_and_holdout(tmp_path_factory.mktemp("rec"), 4.0)
 
 
 def _campaign(folder: Path, recordings: Path, machines, dates, broken=()) -> Path:

@@ -20,6 +20,7 @@ import psutil
 import pytest
 
 from boomfmi.campaign import write_manifest
+from test_campaign import fit_and_holdout
 
 BIN = Path(sys.executable).parent
 
@@ -50,14 +51,7 @@ report.rig_model = rig_model
 @pytest.fixture(scope="module")
 def recordings(tmp_path_factory):
     """Two short effect-free recordings of the virtual rig (fit and holdout)."""
-    from boomfmi.experiments import random_steps
-    from boomfmi.recording import write_recording
-    from boomfmi.rig.offline import run_offline
-    d = tmp_path_factory.mktemp("rec")
-    fit, hold = random_steps(3, duration=3.0), random_steps(4, duration=3.0)
-    write_recording(d / "fit.csv", run_offline({"seed": 5}, fit, fit.duration))
-    write_recording(d / "hold.csv", run_offline({"seed": 6}, hold, hold.duration))
-    return d
+    return fit_and_holdout(tmp_path_factory.mktemp("rec"), 3.0)
 
 
 def _manifest(folder: Path, recordings: Path, machines, date="2025-01-06") -> Path:

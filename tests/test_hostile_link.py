@@ -24,22 +24,7 @@ from boomfmi.recording import read_recording
 from boomfmi.rig import make_rig
 from boomfmi.rig import server as rig_server
 from chaos import ChaosProxy
-from test_rig_link import KEY, Rig
-
-
-@pytest.fixture
-def rig(tmp_path, monkeypatch):
-    monkeypatch.setenv("BOOMFMI_LINK_KEY", KEY)
-    rigs = []
-
-    def start(**kw):
-        r = Rig(tmp_path, **kw)
-        rigs.append(r)
-        return r
-    yield start
-    for r in rigs:
-        if r.proc.poll() is None:
-            r.stop()
+from test_rig_link import KEY, Rig, key_env, rig  # noqa: F401  (the rig fixture and the key it needs)
 
 
 def when_recording(out, action, delay=0.0):
