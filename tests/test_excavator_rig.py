@@ -215,7 +215,7 @@ def bridge_fmu() -> Path:
     path = ROOT / "build" / "fmus" / "excavator_bridge.fmu"
     src = ROOT / "src" / "boomfmi"
     sources = [*ROOT.joinpath("fmus", "excavator_bridge").iterdir(), *src.joinpath("link").glob("*.py"),
-               *src.joinpath("physics").glob("*.py"), src / "recording.py", src / "fmislave.py"]
+               *src.joinpath("physics").glob("*.py"), src / "recording.py", src / "fmislave.py", src / "rigbridge.py"]
     if not path.is_file() or any(s.stat().st_mtime > path.stat().st_mtime for s in sources):
         subprocess.run([sys.executable, str(ROOT / "build_fmus.py"), "excavator_bridge"], check=True, cwd=ROOT)
     return path
