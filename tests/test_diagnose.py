@@ -58,6 +58,16 @@ def test_a_leaking_piston_is_found_and_the_report_follows_the_spec(leaky, ssp_pa
     assert conf["agrees"] and conf["shrink"] > 0.6
     assert abs(conf["shrink"] - conf["reference_shrink"]) < 0.05
     assert "Confirmation through the FMUs" in html and "they agree" in html
+    # a report for people: one sentence to act on first, parameters with units and
+    # intervals (no raw JSON), the candidates as a chart, and every figure inside the page
+    assert html.index('<p class="act">Most likely cause: piston_leakage') < html.index("replace the piston seal") \
+        < html.index("<h2>Baseline")
+    assert "Most likely cause: piston_leakage" in proc.stdout and "replace the piston seal" in proc.stdout
+    assert "95 % interval" in html and "N&middot;s/m" in html and "kg/(s&middot;Pa)" in html
+    assert '{"' not in html and "How much each candidate explains" in html
+    assert 'src="data:image/png;base64,' in html and 'src="overlay_' not in html
+    lo, hi = doc["baseline"]["ci95"]["K_v"]
+    assert lo <= doc["baseline"]["params"]["K_v"] <= hi and doc["baseline"]["units"]["K_v"] == "N.s/m"
 
 
 def test_no_holdout_is_refused(leaky):
@@ -139,3 +149,32 @@ def test_a_pair_starts_with_both_effects_halved_where_size_is_strength():
     assert _halved("valve_deadband", "width", 1.5 * lower) == pytest.approx(lower)
     assert _halved("heat_transfer", "n", 1.2) == 1.2
     assert _halved("end_cushioning", "A_n", 5e-7) == 5e-7
+
+
+@pytest.mark.parametrize("doc, says", [
+    ({"judgeable": False, "reason": "no motion in a.csv", "verdict": []}, "Record again with the boom moving"),
+    ({"verdict": [], "gap_beyond_noise": False}, "Nothing to fix"),
+    ({"verdict": [], "gap_beyond_noise": True}, "record longer or livelier motion"),
+    ({"verdict": ["unexplained"], "where": [{"channel": "p_a", "regime": "stroke_end", "subsystem": "cylinder",
+                                              "share": 0.7, "windows": []}]},
+     "mostly in p_a during stroke end (cylinder)"),
+    ({"verdict": ["valve_deadband", "piston_leakage"],
+      "effects": [{"name": "valve_deadband + piston_leakage", "shrink": 0.9}]},
+     "Most likely cause: valve_deadband and piston_leakage (it removes 90 % of the gap on the holdout). "
+     "The valve stays shut around its centre"),
+])
+def test_the_report_s_first_sentence_says_what_to_do(doc, says):
+    from boomfmi.diagnose.report import action_sentence
+    assert says in action_sentence(doc)
+
+
+def test_every_effect_of_the_catalogue_says_what_a_technician_can_do():
+    from boomfmi.model import EFFECTS
+    assert all(len(e.advice) > 20 for e in EFFECTS.values()), [n for n, e in EFFECTS.items() if not e.advice]
+
+
+def test_a_pair_s_parameters_are_shown_with_their_units():
+    from boomfmi.diagnose.report import _params_text
+    text = _params_text("valve_deadband + piston_leakage",
+                        {"valve_deadband": {"width": 0.3}, "piston_leakage": {"C": 2e-11}})
+    assert text == "valve_deadband.width = 0.3 V, piston_leakage.C = 2e-11 kg/(s&middot;Pa)"

@@ -337,6 +337,8 @@ def _diagnose(args) -> int:
                   f"{c.get('reference_shrink', float('nan')):.2f}, {'agreeing' if c.get('agrees') else 'DISAGREEING'}")
         elif "skipped" in c or "error" in c:
             print(f"not confirmed through the FMUs: {c.get('skipped') or c.get('error')}")
+    from .diagnose.report import action_sentence
+    print(action_sentence(doc))
     print(f"wrote {args.out}/diagnosis.json and {args.out}/report.html")
     return 0
 

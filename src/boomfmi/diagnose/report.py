@@ -8,7 +8,9 @@ and subsystem, the candidate table) and the PNGs it shows.
 """
 from __future__ import annotations
 
+import base64
 import html
+import io
 import json
 from pathlib import Path
 
@@ -97,6 +99,8 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
                 "shrink": round(c.shrink, 4), "score": c.score} for c in att.candidates]
     doc = {"judgeable": True,
            "baseline": {"params": {k: round(v, 6) for k, v in values.items()},
+                        "ci95": {k: [_finite(z) for z in e.ci95] for k, e in result.params.items()},
+                        "units": {k: e.unit for k, e in result.params.items()},
                         "nrmse_holdout": {k: round(v, 6) for k, v in att.baseline_holdout.items()},
                         "warnings": result.warnings},
            "noise_floor": {k: round(v, 6) for k, v in att.noise.items()},
@@ -123,6 +127,10 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
     return doc
 
 
+def _finite(z) -> float | None:
+    return round(float(z), 6) if np.isfinite(z) else None
+
+
 #: every file a diagnosis writes; those a run does not write are removed with its set
 OUTPUTS = ("diagnosis.json", "report.html", *(f"overlay_{c}.png" for c in CHANNELS), "residual_breakdown.png")
 
@@ -132,7 +140,11 @@ def _write(out: Path, doc: dict, hold, base_sim, after_sim, loc=None) -> None:
         images = []
         if hold is not None:
             images = _plots(files, hold, base_sim, after_sim, loc, doc)
-        files.path("report.html").write_text(_html(doc, images))
+        embedded = {n: base64.b64encode(files.path(n).read_bytes()).decode("ascii") for n in images}
+        chart = _candidates_chart(doc)
+        if chart:
+            embedded["candidates"] = chart
+        files.path("report.html").write_text(_html(doc, images, embedded))
         files.path("diagnosis.json").write_text(dumps(doc, indent=2))
 
 
@@ -172,7 +184,88 @@ def _plots(files: OutputSet, hold, base_sim, after_sim, loc, doc) -> list[str]:
     return names
 
 
-def _html(doc: dict, images: list[str]) -> str:
+def action_sentence(doc: dict) -> str:
+    """One sentence a technician can act on, from the diagnosis ``doc`` (plain text)."""
+    from ..model import EFFECTS
+    verdict = doc.get("verdict") or []
+    if not doc.get("judgeable", True):
+        return f"Record again with the boom moving: {doc.get('reason', 'the recordings cannot be judged')}."
+    if not verdict and not doc.get("gap_beyond_noise"):
+        return "Nothing to fix: the model matches the machine within the recordings' own noise."
+    if not verdict:
+        return ("Nothing the recordings can show: the gap lies within what the baseline's own uncertainty leaves "
+                "open; record longer or livelier motion (starts, reversals, runs to the ends) to narrow it.")
+    if verdict == ["unexplained"]:
+        w = (doc.get("where") or [{}])[0]
+        place = (f", mostly in {w['channel']} during {w['regime'].replace('_', ' ')} ({w['subsystem']})"
+                 if w else "")
+        return (f"The model misses something that none of its candidate effects explains{place}: inspect that "
+                "part of the machine and record it again in that regime.")
+    shrink = next((c.get("shrink") for c in doc.get("effects", []) if c.get("name") == " + ".join(verdict)
+                   or c.get("name") == verdict[0]), None)
+    named = " and ".join(verdict)
+    how = f" (it removes {100 * shrink:.0f} % of the gap on the holdout)" if shrink is not None else ""
+    advice = "; ".join(EFFECTS[v].advice for v in verdict if v in EFFECTS and EFFECTS[v].advice)
+    return f"Most likely cause: {named}{how}. {advice[:1].upper() + advice[1:]}." if advice else \
+        f"Most likely cause: {named}{how}."
+
+
+def _number(v) -> str:
+    return "&ndash;" if v is None else f"{v:.4g}"
+
+
+def _unit(u: str) -> str:
+    return html.escape(u).replace(".", "&middot;") if u and u != "1" else ""
+
+
+def _params_text(name: str, params: dict) -> str:
+    """An effect's fitted parameters with their units (the catalogue's)."""
+    from ..model import EFFECTS
+    units = {p.name: p.unit for e in name.split(" + ") if e in EFFECTS for p in EFFECTS[e].parameters}
+    flat = {}
+    for k, v in params.items():
+        if isinstance(v, dict):                   # a pair: {effect: {parameter: value}}
+            flat.update({f"{k}.{q}": w for q, w in v.items()})
+            units.update({f"{k}.{p.name}": p.unit for p in EFFECTS[k].parameters} if k in EFFECTS else {})
+        else:
+            flat[k] = v
+    return ", ".join(f"{html.escape(k)} = {_number(v)} {_unit(units.get(k, ''))}".rstrip() for k, v in flat.items())
+
+
+def _candidates_chart(doc: dict) -> str | None:
+    """A bar chart of each candidate's holdout shrink (base64 PNG), the verdict's bar dark."""
+    cands = doc.get("effects") or []
+    if not cands:
+        return None
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    names = [c["name"] for c in cands][::-1]
+    values = [max(-0.5, min(1.0, c["shrink"])) for c in cands][::-1]
+    named = " + ".join(doc.get("verdict") or [])
+    colours = ["#1f4e79" if n == named or n in (doc.get("verdict") or []) else "#9dbbd6" for n in names]
+    fig, ax = plt.subplots(figsize=(8, 0.35 * len(names) + 1.0))
+    ax.barh(names, values, color=colours)
+    ax.axvline(0.0, color="k", lw=0.8)
+    ax.set_xlim(-0.5, 1.0)
+    ax.set_xlabel("share of the holdout gap the candidate removes (shrink; < 0: worse)")
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, dpi=90, format="png")
+    plt.close(fig)
+    return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _img(name: str, embedded: dict | None) -> str:
+    e = html.escape
+    src = f"data:image/png;base64,{embedded[name]}" if embedded and name in embedded else e(name)
+    return f'<p><img src="{src}" alt="{e(name)}" title="{e(name)}" style="max-width:100%"></p>'
+
+
+def _html(doc: dict, images: list[str], embedded: dict | None = None) -> str:
+    """The report: one sentence to act on, the verdict, the parameters with units and
+    intervals, the candidates as a bar chart, the overlays, where the gap lies.  With
+    ``embedded`` (name -> base64 PNG) the page holds its figures and can be mailed alone."""
     e = html.escape
     verdict = doc["verdict"]
     if not doc.get("judgeable", True):
@@ -198,34 +291,51 @@ def _html(doc: dict, images: list[str]) -> str:
                     "friction at the recordings' mean pressure.")
     else:
         headline = "The gap is explained by: " + ", ".join(f"<b>{e(v)}</b>" for v in verdict)
+        best = (doc.get("effects") or [None])[0]
+        if best and best["name"] == " + ".join(verdict):
+            headline += f", fitted as {_params_text(best['name'], best['params'])}"
     rows = "".join(
-        f"<tr><td>{e(c['name'])}</td><td>{e(json.dumps(plain(c['params'])))}</td>"
+        f"<tr><td>{e(c['name'])}</td><td>{_params_text(c['name'], c['params'])}</td>"
         f"<td>{c['shrink']:.3f}</td><td>{c['score']:.3f}</td>"
         f"<td>{' / '.join(f'{100 * v:.3f} %' for v in c['nrmse_holdout_after'].values())}</td></tr>"
         for c in doc.get("effects", []))
     where = "".join(
         f"<tr><td>{e(w['channel'])}</td><td>{e(w['regime'])}</td><td>{e(w['subsystem'])}</td>"
-        f"<td>{w['share']:.3f}</td><td>{e(str(w['windows']))}</td></tr>" for w in doc.get("where", []))
+        f"<td>{100 * w['share']:.1f} %</td><td>{e(', '.join(f'{a:.2f} to {b:.2f}' for a, b in w['windows']))}</td></tr>"
+        for w in doc.get("where", []))
     base = doc.get("baseline") or {}
-    params = ", ".join(f"{k} = {v:.4g}" for k, v in (base.get("params") or {}).items())
+    ci, units = base.get("ci95") or {}, base.get("units") or {}
+    params = "".join(
+        f"<tr><td>{e(k)}</td><td>{_number(v)}</td>"
+        f"<td>{(_number(ci[k][0]) + ' to ' + _number(ci[k][1])) if k in ci else '&ndash;'}</td>"
+        f"<td>{_unit(units.get(k, ''))}</td></tr>" for k, v in (base.get("params") or {}).items())
+    params = ("<table><tr><th>parameter</th><th>value</th><th>95 % interval</th><th>unit</th></tr>"
+              f"{params}</table>") if params else ""
     before = " / ".join(f"{100 * v:.3f} %" for v in (base.get("nrmse_holdout") or {}).values())
     warnings = "".join(f"<li>{e(w)}</li>" for w in base.get("warnings") or [])
     warnings = f"<p><b>Warnings of the baseline's identification:</b></p><ul>{warnings}</ul>" if warnings else ""
-    imgs = "".join(f'<p><img src="{e(n)}" alt="{e(n)}" style="max-width:100%"></p>' for n in images)
+    imgs = "".join(_img(n, embedded) for n in images)
+    chart = (f"<h2>How much each candidate explains</h2>{_img('candidates', embedded)}"
+             if embedded and "candidates" in embedded else "")
+    noise = ", ".join(f"{e(k)} {100 * v:.3f} %" for k, v in (doc.get("noise_floor") or {}).items())
+    spread = ", ".join(f"{e(k)} {100 * v:.3f} %" for k, v in (doc.get("baseline_spread") or {}).items())
     conf = _confirmation_html(doc.get("confirmation"))
     return f"""<!doctype html><html><head><meta charset="utf-8"><title>boomfmi diagnosis</title>
 <style>body{{font-family:sans-serif;max-width:980px;margin:2em auto}}table{{border-collapse:collapse}}
-td,th{{border:1px solid #ccc;padding:4px 8px;font-size:13px}}</style></head><body>
+td,th{{border:1px solid #ccc;padding:4px 8px;font-size:13px}}.act{{font-size:1.3em;background:#eef4fa;padding:.6em}}</style>
+</head><body>
 <h1>Diagnosis of the sim-to-real gap</h1>
-<p style="font-size:1.3em">{headline}</p>
-<h2>Baseline</h2><p>Re-identified on the fit recordings: {e(params)}.<br>
-Holdout NRMSE p_a / p_b / x: {before}.</p>{warnings}
+<p class="act">{e(action_sentence(doc))}</p>
+<p>{headline}</p>
+<h2>Baseline</h2><p>Re-identified on the fit recordings (values with their 95 % intervals):</p>{params}
+<p>Holdout NRMSE p_a / p_b / x: {before}.</p>{warnings}
+{chart}
 <h2>Before and after, on the holdout recording</h2>{imgs}
 <h2>Where the gap lies</h2><table><tr><th>channel</th><th>regime</th><th>subsystem</th><th>share</th><th>windows [s]</th></tr>{where}</table>
 <h2>Candidate effects, best first</h2><p>Candidates are fitted beyond a gap (summed NRMSE) of {100 * doc.get("gap_threshold", 0.0):.3f} %:
-{NOISE_FACTOR:g} times the noise floor {e(json.dumps(doc.get("noise_floor", {})))} and {100 * ABS_FLOOR:g} %;
+{NOISE_FACTOR:g} times the noise floor ({noise}) and {100 * ABS_FLOOR:g} %;
 a gap no candidate explains is "unexplained" beyond {100 * doc.get("unexplained_threshold", 0.0):.3f} %, which adds the
-baseline's own spread {e(json.dumps(doc.get("baseline_spread", {})))}.</p>
+baseline's own spread ({spread}).</p>
 <table><tr><th>effect</th><th>fitted parameters</th><th>shrink</th><th>score</th>
 <th>holdout NRMSE after (p_a / p_b / x)</th></tr>{rows}</table>
 {conf}

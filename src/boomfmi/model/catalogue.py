@@ -62,6 +62,7 @@ class Effect(NamedTuple):
     forms: Tuple[Tuple[Parameter, ...], ...]  #: the laws, each with its parameters
     summary: str
     apply: Optional[Callable] = None        #: a stateless stage's function, see :mod:`.boom`
+    advice: str = ""                        #: what a technician can check or do where it is found
 
     @property
     def parameters(self) -> Tuple[Parameter, ...]:
@@ -143,12 +144,14 @@ EFFECTS = {e.name: e for e in (
            ((_p("tau", "s", 2e-4, 0.05, True, "tau_spool",
                 "valve_dynamics: time constant of the spool's first-order lag; 0: off",
                 no_max=SIZE_UNBOUNDED),),),
-           "first-order lag of the spool: dy/dt = (u - y) / tau"),
+           "first-order lag of the spool: dy/dt = (u - y) / tau",
+           advice="the valve's spool follows the command late: check the valve's driver and pilot supply, and give the controller and the model the spool's lag"),
     Effect("valve_deadband", "valve", "command",
            ((_p("width", "V", 0.01, 1.5, True, "deadband",
                 "valve_deadband: half-width of the closed band around 5 V; 0: off", max=4.9),),),
            "no opening for |u - 5| < width; linear beyond, full opening still at 0 and 10 V",
-           _deadband),
+           _deadband, advice="the valve stays shut around its centre: re-zero the valve, or compensate the "
+                             "deadband in the controller"),
     Effect("heat_transfer", "cylinder", "heat",
            ((_p("h", "W/(m2.K)", 1.0, 2000.0, True, "h_wall",
                 "heat_transfer: heat-transfer coefficient between the air and the chamber wall; 0: off",
@@ -159,16 +162,21 @@ EFFECTS = {e.name: e for e in (
            "the pressure relaxes towards the isothermal m R T_w / V with time constant "
            "m c_v / (h A_wall), A_wall the wall the air touches (end faces and barrel, growing with "
            "the chamber's length); or the chambers follow a polytropic process of exponent n "
-           "between isothermal and isentropic, whichever fits"),
+           "between isothermal and isentropic, whichever fits",
+           advice="the air exchanges heat with the chamber walls: a held pressure drifts as the air cools; "
+                  "no repair, but slow tests and the model need it"),
     Effect("piston_leakage", "cylinder", "seal",
            ((_C_LEAK,), (_A_LEAK,), (_C_LEAK, _A_LEAK)),
            "a leak A -> B across the seal: laminar C (p_a - p_b), turbulent through a gap "
-           "of area A (the orifice law, Eq. 1), or both at once (a worn seal), whichever fits", _leak),
+           "of area A (the orifice law, Eq. 1), or both at once (a worn seal), whichever fits", _leak,
+           advice="air leaks across the piston seal: inspect and replace the piston seal"),
     Effect("stribeck_friction", "boom_load", "friction",
            ((_p("v_s", "m/s", 2e-4, 0.1, True, "v_s",
                 "stribeck_friction: Stribeck velocity of exp(-|v|/v_s); 0: off (the paper's step)",
                 no_max=SIZE_UNBOUNDED),),),
-           "Coulomb level F_d + (F_s - F_d) exp(-|v| / v_s)", _stribeck),
+           "Coulomb level F_d + (F_s - F_d) exp(-|v| / v_s)", _stribeck,
+           advice="the friction falls off with speed (stick-slip at low speed): check the rod's and the "
+                  "joint's lubrication, and avoid slow moves in fine positioning"),
     Effect("end_cushioning", "cylinder", "port",
            ((_CUSHION_LENGTH, _CUSHION_AREA),
             (_CUSHION_LENGTH, _CUSHION_AREA,
@@ -181,7 +189,8 @@ EFFECTS = {e.name: e for e in (
            "(area A_n, to the exhaust) in series with the valve; inflow passes freely (the check "
            "valve); where the port's volume V_p is given, the chamber the sensor reads is left "
            "without it within the cushion, whichever fits",
-           _cushion),
+           _cushion, advice="the cylinder's end cushions brake the last part of the stroke: check the cushion "
+                            "needles' setting, or keep the work away from the stroke's ends"),
     Effect("pressure_friction", "boom_load", "friction",
            ((_p("c_sum", "N/Pa", 1e-7, 2e-4, True, "c_friction_sum",
                 "pressure_friction: rise of the static and Coulomb friction per pascal of the chambers' "
@@ -194,13 +203,16 @@ EFFECTS = {e.name: e for e in (
                 "difference across the piston; 0: off", no_max=SIZE_UNBOUNDED),)),
            "the seals pressed by the pressure they hold: F_s and F_d both grow by c_sum times the "
            "chambers' summed gauge pressure (the real friction tests' law), by c_max times the higher "
-           "chamber's, or by c_diff times the pressure difference across the piston, whichever fits", _pressure_friction),
+           "chamber's, or by c_diff times the pressure difference across the piston, whichever fits", _pressure_friction,
+           advice="the seals' friction grows with the pressure they hold: check the seals for wear or "
+                  "swelling and the rod's lubrication"),
     Effect("sensor_lag", "hardware_bridge", "measurement",
            ((_TAU_SENSOR,),
             (_TAU_SENSOR, _p("delay", "s", 2e-4, 0.02, True, "delay_sensor",
                              "sensor_lag: dead time of every measured channel (before its lag); 0: none",
                              no_max=SIZE_UNBOUNDED))),
-           "a first-order lag of every measured channel, or a dead time then the lag, whichever fits"),
+           "a first-order lag of every measured channel, or a dead time then the lag, whichever fits",
+           advice="the sensors report late: check the DAQ's filters, sampling and the transducers' response"),
 )}
 
 #: the effects.md names that have no entry yet, with why (checked by the tests)
