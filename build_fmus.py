@@ -5,10 +5,14 @@
 
 Each FMU is self-contained (its physics bundled under a private name), carries SI
 units, bounds and output dependencies, and passes fmpy.validation.validate_fmu.
-``--fmi 3`` builds the FMI 3.0 versions of the five model FMUs (valve, cylinder, boom_load, force_estimator, linkage) (pythonfmu3, from the
-same adapters) into build/fmi3/ instead; the SSPs stay FMI 2.0.  The FMUs are lean by
+Each SSP is packed twice: build/<name>.ssp (SSP 1.0, with the system input connectors
+that fmpy's SSP runner drives) and build/osp/<name>.ssp (without them, for libcosim and
+ecos, which refuse them).  The FMI 3.0 version of every FMU (pythonfmu3, from the same
+adapters) goes into build/fmi3/ too; the SSPs stay FMI 2.0.  ``--fmi 2`` builds the FMI
+2.0 FMUs and the SSPs only, ``--fmi 3`` the FMI 3.0 FMUs only.  The FMUs are lean by
 default (resources/boomfmi_requirements.txt names the Python and numpy they need, checked
-at fmi2Instantiate); ``--portable`` puts numpy inside, for each platform they declare.
+at fmi2Instantiate); ``--portable`` puts numpy inside, for each platform they declare
+(FMI 2.0 only: the FMI 3.0 FMUs run in Python hosts only, on the host's numpy).
 """
 from __future__ import annotations
 
@@ -39,9 +43,9 @@ def main(argv=None) -> int:
                         help="put numpy (for linux64 and win64) inside each FMU, so that a host needs only a "
                              "CPython of this build's version (about 20 MB more per FMU); default: lean FMUs "
                              "that name what they need at fmi2Instantiate")
-    parser.add_argument("--fmi", choices=("2", "3"), default="2",
-                        help="FMI version: 2 (default) into <out>/fmus/ with the SSPs; "
-                             "3: the model FMUs into <out>/fmi3/")
+    parser.add_argument("--fmi", choices=("2", "3"), default=None,
+                        help="only one FMI version: 2 into <out>/fmus/ with the SSPs, 3 into <out>/fmi3/ "
+                             "(default: both)")
     args = parser.parse_args(argv)
     if args.fmi == "3":
         return build_fmi3(parser, args)
@@ -56,7 +60,7 @@ def main(argv=None) -> int:
                 from boomfmi.fmubuild.references import INPUTS, write_references
                 if name in INPUTS:      # the bridge's behaviour depends on its rig or recording
                     print(f"wrote {write_references(HERE / 'fmus' / name, path)}")
-        from boomfmi.fmubuild.ssp import fmus_of, pack_ssp, write_reference_parameters
+        from boomfmi.fmubuild.ssp import fmus_of, osp_ssp, pack_ssp, write_reference_parameters
         if set(args.names) == set(FMU_NAMES) and args.write_references:
             print(f"wrote {write_reference_parameters([HERE / 'ssp' / ssd for ssd in SSPS.values()], args.out / 'fmus', HERE / 'ssp' / 'reference_rig.ssv')}")
             from boomfmi.describe import INTERFACES_DOC, interfaces_document
@@ -76,10 +80,16 @@ def main(argv=None) -> int:
             if missing:
                 print(f"not packed {args.out / f'{name}.ssp'}: {', '.join(missing)} not built yet")
                 continue
-            print(f"packed {pack_ssp(HERE / 'ssp' / ssd, args.out / 'fmus', args.out / f'{name}.ssp')}")
+            packed = pack_ssp(HERE / 'ssp' / ssd, args.out / 'fmus', args.out / f'{name}.ssp')
+            print(f"packed {packed}")
+            print(f"packed {osp_ssp(packed)} (for libcosim and ecos: without system connectors)")
     except BuildError as e:
         print(f"build_fmus.py: {e}", file=sys.stderr)
         return 1
+    if args.fmi is None and args.portable:
+        print("FMI 3.0: not built with --portable (the FMI 3.0 FMUs run in Python hosts, on the host's numpy)")
+    elif args.fmi is None:
+        return build_fmi3(parser, args)
     return 0
 
 
@@ -92,8 +102,10 @@ def build_fmi3(parser, args) -> int:
     unknown = sorted(set(names) - set(FMI3_NAMES))
     if unknown:
         parser.error(f"no FMI 3.0 version of: {', '.join(unknown)}; FMI 3.0: {', '.join(FMI3_NAMES)}")
-    if args.write_references:
+    if args.write_references and args.fmi == "3":
         parser.error("--write-references: the references are written from the FMI 2.0 FMUs")
+    if args.portable:
+        parser.error("--portable: FMI 2.0 only (the FMI 3.0 FMUs run in Python hosts, on the host's numpy)")
     try:
         with tempfile.TemporaryDirectory(prefix="boomfmi_fmi3_shim_") as tmp:
             shim = compile_shim3(Path(tmp) / "shim3.so")

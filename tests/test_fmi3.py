@@ -1,7 +1,8 @@
-"""The FMI 3.0 versions of the four model FMUs (``build_fmus.py --fmi 3``, pythonfmu3):
-built from the same adapters as FMI 2.0, they validate, declare what the FMI 2.0 FMUs
-declare, reproduce the FMI 2.0 reference results through ``fmpy.simulate_fmu``, and
-reject a bad parameter with fmi3Error and a message that names it."""
+"""The FMI 3.0 versions of every FMU of the FMI 2.0 set (``build_fmus.py`` builds them
+by default, ``--fmi 3`` alone; pythonfmu3): built from the same adapters as FMI 2.0,
+they validate, declare what the FMI 2.0 FMUs declare, reproduce the FMI 2.0 reference
+results through ``fmpy.simulate_fmu`` (the bridges: the FMI 2.0 bridge's replay, value
+for value), and reject a bad parameter with fmi3Error and a message that names it."""
 from __future__ import annotations
 
 import subprocess
@@ -18,7 +19,10 @@ from fmpy.validation import validate_fmu
 from test_invalid_parameters import INVALID
 
 ROOT = Path(__file__).resolve().parents[1]
-NAMES = ("valve", "cylinder", "boom_load", "force_estimator")
+NAMES = ("valve", "cylinder", "boom_load", "force_estimator", "hardware_bridge", "linkage", "excavator_bridge",
+         "excavator_force_estimator")
+#: those with reference results (fmus/<name>/<name>_in.csv, _ref.csv)
+REFERENCED = tuple(n for n in NAMES if (ROOT / "fmus" / n / f"{n}_ref.csv").is_file())
 FMI3_TYPE = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String"}
 
 
@@ -77,7 +81,17 @@ def test_fmi3_declares_what_fmi2_declares(fmi3_dir, fmu, name):
     assert [u.variable.name for u in md3.initialUnknowns] == [u.variable.name for u in md2.initialUnknowns]
 
 
-@pytest.mark.parametrize("name", NAMES)
+def test_every_fmu_of_the_fmi2_set_has_an_fmi3_version():
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("build_fmus_script", ROOT / "build_fmus.py")
+    build_fmus = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(build_fmus)
+    from boomfmi.fmubuild.fmi3 import FMI3_NAMES
+    assert set(FMI3_NAMES) == set(build_fmus.FMU_NAMES) == set(NAMES)
+    assert {"valve", "cylinder", "boom_load", "force_estimator", "linkage"} <= set(REFERENCED)
+
+
+@pytest.mark.parametrize("name", REFERENCED)
 def test_fmi3_reference_result(fmi3_dir, name):
     """fmus/<name>/<name>_in.csv through fmpy.simulate_fmu gives <name>_ref.csv, to the
     tolerance of the FMI 2.0 replay (test_reference_results.py).
@@ -107,6 +121,26 @@ def test_fmi3_reference_result(fmi3_dir, name):
             assert all(o.dependencies for o in md.outputs), "a state beside feedthrough: align per output"
             want = np.r_[want[:1], want[:-1]]
         np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12, err_msg=col)
+
+
+def test_fmi3_hardware_bridge_replays_as_the_fmi2_bridge(fmi3_dir, fmu, tmp_path):
+    """The bridge (no reference file: its outputs are its recording's) in replay mode,
+    FMI 3.0 against FMI 2.0 through fmpy.simulate_fmu: the same values."""
+    from boomfmi.recording import write_recording
+    rng = np.random.default_rng(3)
+    t = np.round(np.arange(0, 0.2001, 1e-3), 6)
+    data = pd.DataFrame({"t": t, "u": np.where(t < 0.1, 10.0, 2.5),
+                         "p_a": rng.normal(3e5, 1e3, t.size), "p_b": rng.normal(2e5, 1e3, t.size),
+                         "alpha": 0.7 + 0.1 * t + rng.normal(0, 1e-4, t.size), "f_ext": np.linspace(0, -50, t.size)})
+    path = write_recording(tmp_path / "run.csv", data)
+    outs = ["p_a", "p_b", "alpha", "x", "u_applied", "f_ext", "link_ok"]
+    runs = [simulate_fmu(str(f), start_values={"mode": "replay", "recording": str(path)}, stop_time=0.2,
+                         output_interval=1e-3, output=outs)
+            for f in (fmu("hardware_bridge"), fmi3_dir / "hardware_bridge.fmu")]
+    assert len(runs[0]) == len(runs[1]) == len(data)
+    for col in outs:
+        np.testing.assert_array_equal(runs[1][col], runs[0][col], err_msg=col)
+    np.testing.assert_array_equal(runs[1]["p_a"], data["p_a"])
 
 
 def _instance(path: Path, tmp: Path, log: Log):

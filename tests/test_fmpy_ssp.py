@@ -7,19 +7,21 @@ master (every component on the values transferred after the previous step, then 
 transfers), but
 
 * it applies none of the SSD's parameter bindings (``read_ssd`` parses them): the
-  caller passes ``parameter_set`` (hierarchical names), set before initialisation;
+  caller passes ``parameter_set`` (hierarchical names: the SSP carries its set whole
+  as ``resources/reference_rig.ssv``), set before initialisation;
 * it starts every connector at 0, so in its first step every connected input is 0:
   the cylinder gets no flow (that step is idle, and the run lags ours by one step)
-  and the valve is evaluated at 0 Pa, whose flows reach the cylinder in the second
-  step;
+  and the valve is evaluated at 0 Pa and 0 V (its system connector u reaches it a
+  step late), whose flows reach the cylinder in the second step;
 * it stamps a row with the start of the step whose end values it holds.
 
 The last two cancel in the alignment: fmpy's row k is compared with our row k (t_k).
-The valve's flows at 0 Pa differ from those at the start pressures; the difference,
-held over one step, puts a mass into a chamber that the isentropic chamber turns into
-a pressure kick of k R T dm / V.  The runs may differ by that kick while it exhausts
-through the open valve (50 ms), and after it by no more than its trace on the
-trajectory (1 Pa, 1e-6 m; 0.3 Pa and 4e-8 m seen).
+The valve's flows at 0 Pa and 0 V differ from those at the start pressures and U; the
+difference, held over one step, puts a mass into a chamber that the isentropic chamber
+turns into a pressure kick of k R T dm / V.  The runs may differ by that kick while it
+exhausts through the open valve (50 ms), and after it by no more than its trace on the
+trajectory (1 Pa, 1e-6 m; 0.3 Pa and 4e-8 m seen).  tests/test_system_connectors.py
+runs paper_multistep and the digging cycle through the system connectors.
 """
 from __future__ import annotations
 
@@ -28,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from boomfmi.system import simulate_ssp
+from boomfmi.system import fmpy_input, simulate_ssp
 from boomfmi.system.ssp import read_ssp
 
 fmpy_ssd = pytest.importorskip("fmpy.ssp.ssd")
@@ -57,10 +59,9 @@ def _fmpy_connections(path) -> set[tuple[str, str]]:
 def test_fmpy_wires_the_connections_the_ssd_declares(fmu_dir, name):
     """An input connector that no connection ends at, fmpy wires to the source of the
     connection found before it (boom_load.f_ext to cylinder.p_b) or fails; the SSDs
-    declare none, so fmpy's wiring is exactly the SSD's."""
+    declare none, so fmpy's wiring is exactly the SSD's (a system connector named bare)."""
     path = fmu_dir.parent / f"{name}.ssp"
-    ours = {(f"{c.start_element}.{c.start_connector}", f"{c.end_element}.{c.end_connector}")
-            for c in read_ssp(path).connections}
+    ours = {tuple(c.describe().split(" -> ")) for c in read_ssp(path).connections}
     assert _fmpy_connections(path) == ours
 
 
@@ -69,10 +70,11 @@ def test_pack_ssp_refuses_an_input_connector_that_no_connection_ends_at(fmu_dir,
     from boomfmi.fmubuild.ssp import pack_ssp
     ssd = (ROOT / "ssp" / "SystemStructure.ssd").read_text()
     declared = '<ssd:Connector name="p_a" kind="input"><ssc:Real unit="Pa"/></ssd:Connector>'
-    loose = '<ssd:Connector name="u" kind="input"><ssc:Real unit="V"/></ssd:Connector>\n          '
+    loose = '<ssd:Connector name="f_ext" kind="input"><ssc:Real unit="N"/></ssd:Connector>\n          '
     assert ssd.count(declared) == 2        # the valve's, then the boom load's
-    (tmp_path / "SystemStructure.ssd").write_text(ssd.replace(declared, loose + declared, 1))
-    with pytest.raises(BuildError, match=r"valve\.u end no connection"):
+    head, _, tail = ssd.rpartition(declared)
+    (tmp_path / "SystemStructure.ssd").write_text(head + loose + declared + tail)
+    with pytest.raises(BuildError, match=r"boom_load\.f_ext end no connection"):
         pack_ssp(tmp_path / "SystemStructure.ssd", fmu_dir, tmp_path / "loose.ssp")
     assert not (tmp_path / "loose.ssp").exists()
 
@@ -107,13 +109,15 @@ def _kick(ours, theirs, chamber: str, params) -> float:
 
 
 def test_fmpy_runs_the_ssp_and_agrees_with_the_jacobi_master(ssp_path):
-    bound = _bound_parameters(ssp_path)
-    parameter_set = fmpy_ssd.ParameterSet(name="bound", parameters=[
-        fmpy_ssd.Parameter(name=n, type=t, value=v) for n, (t, v) in bound.items()])
-    # valve.u is no connector: fmpy sets it once, here, and holds it
-    parameter_set.parameters.append(fmpy_ssd.Parameter(name="valve.u", type="Real", value=str(U)))
-    theirs = fmpy_simulate_ssp(str(ssp_path), stop_time=STOP, step_size=H, parameter_set=parameter_set)
-    ours = simulate_ssp(ssp_path, stop_time=STOP, step=H, algorithm="jacobi", parameters={"valve.u": U})
+    # the SSP's parameter set whole, and the system connector u held at U
+    parameter_set = fmpy_ssd.read_ssv(str(ssp_path), resource="resources/reference_rig.ssv")
+    theirs = fmpy_simulate_ssp(str(ssp_path), stop_time=STOP, step_size=H, parameter_set=parameter_set,
+                               input=fmpy_input(ssp_path, {"u": U}, H))
+    # fmpy's first step hands the valve 0 V (every connector starts at 0), whose flows the
+    # cylinder takes in the next: ours starts the valve at 0 V (the flows the cylinder
+    # takes in its first step), then drives u = U
+    ours = simulate_ssp(ssp_path, stop_time=STOP, step=H, algorithm="jacobi",
+                        parameters={"valve.u": 0.0}, inputs={"u": U})
 
     # fmpy adds the step to a float time: 1500 or 1501 rows; row k is stamped t_k
     n = min(len(theirs), len(ours))

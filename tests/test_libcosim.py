@@ -24,7 +24,8 @@ def run_libcosim(ssp_path):
     from libcosimpy.CosimObserver import CosimObserver
 
     log_output_level(CosimLogLevel.WARNING)
-    ex = CosimExecution.from_ssp_file(str(ssp_path), step_size=STEP_NS)
+    from boomfmi.fmubuild.ssp import osp_ssp     # libcosim refuses system connectors
+    ex = CosimExecution.from_ssp_file(str(osp_ssp(ssp_path)), step_size=STEP_NS)
     idx = {n: ex.slave_index_from_instance_name(n) for n in ("valve", "cylinder", "boom_load")}
     ref = {(n, v.name.decode()): v.reference for n, i in idx.items() for v in ex.slave_variables(i)}
     observer = CosimObserver.create_last_value()

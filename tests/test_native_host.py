@@ -80,7 +80,8 @@ def run_ecos(ssp_path: Path, tmp: Path, stop_time: float = 1.5, **env_vars) -> s
     env.update(LD_LIBRARY_PATH=os.path.join(sys.prefix, "lib"),   # libtbb.so.12 from the tbb wheel
                TMPDIR=str(tmp),                                   # ecos leaves its extractions behind
                **env_vars)
-    return subprocess.run([str(exe), "simulate", "--path", str(ssp_path), "--stepSize", "0.001",
+    from boomfmi.fmubuild.ssp import osp_ssp     # ecos refuses system connectors
+    return subprocess.run([str(exe), "simulate", "--path", str(osp_ssp(ssp_path)), "--stepSize", "0.001",
                            "--stopTime", str(stop_time), "--parameterSet", "reference_rig",
                            "--scenarioConfig", "scenario.xml", "--csvConfig", "csv.xml"],
                           cwd=tmp, env=env, capture_output=True, text=True, timeout=300)

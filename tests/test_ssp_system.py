@@ -110,12 +110,16 @@ def test_component_binding_is_applied(ssp_path, tmp_path):
     assert simulate_ssp(changed, stop_time=0.001)["cylinder.p_b"][0] == 301325.0
 
 
+#: the SSD's system connector u (and its connection to valve.u) replaced by these
+SYSTEM_U = '''
+      <ssd:Connector name="u" kind="input"><ssc:Real unit="V"/></ssd:Connector>
+    </ssd:Connectors>'''
+U_CONNECTION = '''
+      <ssd:Connection startConnector="u" endElement="valve" endConnector="u"/>'''
 SYSTEM_IO = '''
-    <ssd:Connectors>
       <ssd:Connector name="command" kind="input"><ssc:Real unit="V"/></ssd:Connector>
       <ssd:Connector name="p_a_gauge" kind="output"><ssc:Real unit="Pa"/></ssd:Connector>
-    </ssd:Connectors>
-    <ssd:Elements>'''
+    </ssd:Connectors>'''
 SYSTEM_CONNECTIONS = '''
       <ssd:Connection startConnector="command" endElement="valve" endConnector="u">
         <ssc:LinearTransformation factor="-1" offset="10"/>
@@ -128,7 +132,8 @@ SYSTEM_CONNECTIONS = '''
 
 def test_linear_transformations_and_system_connectors(ssp_path, tmp_path):
     def edit(s):
-        s = s.replace("\n    <ssd:Elements>", SYSTEM_IO, 1)
+        assert SYSTEM_U in s and U_CONNECTION in s
+        s = s.replace(SYSTEM_U, SYSTEM_IO, 1).replace(U_CONNECTION, "", 1)
         return s.replace("\n    </ssd:Connections>", SYSTEM_CONNECTIONS, 1)
     variant = rewrite_ssp(ssp_path, tmp_path / "io.ssp", edit=edit)
     # command 9 V -> valve.u = 10 - 9 = 1 V: the boom extends
@@ -209,15 +214,15 @@ def test_algebraic_loop_is_refused(ssp_path, tmp_path):
     loop = '''
       <ssd:Connection startElement="valve" startConnector="mdot_a" endElement="valve" endConnector="u"/>
     </ssd:Connections>'''
-    variant = rewrite_ssp(ssp_path, tmp_path / "loop.ssp",
-                          edit=lambda s: s.replace("\n    </ssd:Connections>", loop, 1))
+    variant = rewrite_ssp(ssp_path, tmp_path / "loop.ssp",    # in place of the system's u -> valve.u
+                          edit=lambda s: s.replace(U_CONNECTION, "", 1).replace("\n    </ssd:Connections>", loop, 1))
     with pytest.raises(SspError, match="algebraic loop"):
         CoSimulation(variant, 1e-3)
 
 
 def test_unknown_input_name_is_refused(ssp_path):
     with pytest.raises(ValueError, match="no free input"):
-        simulate_ssp(ssp_path, stop_time=0.01, inputs={"u": 1.0})
+        simulate_ssp(ssp_path, stop_time=0.01, inputs={"w": 1.0})
 
 
 def test_a_binding_on_a_free_input_holds_it(ssp_path):

@@ -46,8 +46,9 @@ from xml.etree import ElementTree as ET
 
 from . import REQUIREMENTS_NAME, BuildError, bundle_name, compile_shim, complete_model_description, stage, validate
 
-#: The FMUs built for FMI 3.0 (not the hardware bridge).
-FMI3_NAMES = ("valve", "cylinder", "boom_load", "force_estimator", "linkage")
+#: The FMUs built for FMI 3.0: every one of the FMI 2.0 set (build_fmus.FMU_NAMES).
+FMI3_NAMES = ("valve", "cylinder", "boom_load", "force_estimator", "hardware_bridge", "linkage", "excavator_bridge",
+              "excavator_force_estimator")
 #: pythonfmu3's platform folder for Linux, and the name its library gets beside the shim.
 PLATFORM = "x86_64-linux"
 INNER_SUFFIX = "_pythonfmu3.so"
@@ -75,9 +76,10 @@ def stage3(fmu_dir: Path, staging: Path) -> Path:
         f.write("\n#: read by fmislave: this copy targets FMI 3.0 (pythonfmu3)\nFMI_VERSION = 3\n")
     source = script2.read_text()
     script2.unlink()
-    classes = re.findall(r"^class (\w+)\(BoomSlave\):", source, flags=re.M)
+    classes = re.findall(r"^class (\w+)\((?:BoomSlave|RigBridge)\):", source, flags=re.M)
     if len(classes) != 1:
-        raise BuildError(f"{fmu_dir}: needs exactly one class deriving BoomSlave, found {classes}")
+        raise BuildError(f"{fmu_dir}: needs exactly one class deriving BoomSlave (or the bridges' RigBridge), "
+                         f"found {classes}")
     cls = classes[0]
     source = source.replace(bundle_name(name), bundle_name3(name))
     source += (

@@ -14,10 +14,15 @@ parameter set named ``<set>``.
 fmpy's own SSP runner (``fmpy.ssp.simulation``, 0.3.32) wires a component's input
 connector that no connection ends at to the source of the connection found before it,
 or fails; :func:`pack_ssp` therefore refuses such a connector (a free input is left
-undeclared, and set by variable name).
+undeclared, and set by variable name, or fed by a system input connector).  That runner
+applies no parameter binding either, only the ``parameter_set`` it is given, with
+hierarchical names: so beside the per-component files the SSP carries each cut set
+whole, for this system's components (``resources/<set>.ssv``, ``valve.A_max``), which
+``fmpy.ssp.ssd.read_ssv(ssp, resource="resources/<set>.ssv")`` reads.
 """
 from __future__ import annotations
 
+import os
 import tempfile
 import zipfile
 from pathlib import Path
@@ -81,6 +86,19 @@ def fmus_of(ssd: Path) -> set[str]:
             for source, _ in referenced_sources(Path(ssd)) if source.endswith(".fmu")}
 
 
+def system_parameter_set(source_dir: Path, set_name: str, components: list[str]) -> bytes:
+    """The entries of ``source_dir/<set_name>.ssv`` that belong to ``components``, with
+    their hierarchical names (``valve.A_max``): the set as fmpy's SSP runner applies one."""
+    whole = source_dir / f"{set_name}.ssv"
+    params = read_ssv(whole.read_bytes(), str(whole))
+    part = {n: (p.value, p.unit) for n, p in params.items() if n.partition(".")[0] in components}
+    with tempfile.TemporaryDirectory() as tmp:
+        out = write_ssv(Path(tmp) / f"{set_name}.ssv", set_name, part,
+                        f"{', '.join(components)}: their part of {whole.name}, hierarchical names "
+                        f"(for hosts that apply a system-level set only, as fmpy's SSP runner)")
+        return out.read_bytes()
+
+
 def unconnected_inputs(ssd: Path) -> list[str]:
     """``component.connector`` of every input connector that ``ssd`` declares on a
     component but that no connection ends at."""
@@ -93,9 +111,68 @@ def unconnected_inputs(ssd: Path) -> list[str]:
             if c.get("kind") == "input" and (comp.get("name"), c.get("name")) not in ends]
 
 
-def pack_ssp(ssd: Path, fmu_dir: Path, out: Path) -> Path:
+#: Where build_fmus.py packs each system a second time for libcosim and ecos (``build/osp/``).
+OSP_FOLDER = "osp"
+
+
+def without_system_connectors(ssd_bytes: bytes) -> bytes:
+    """The SSD with its system connectors left out: the system's ``Connectors``, every
+    connection that starts or ends at the system, and each component connector that
+    such a connection alone fed (an input nothing else drives is then left undeclared,
+    set by variable name).  libcosim 0.11 ("No such node (<xmlattr>.startElement)") and
+    ecos ("No element named: ") refuse a connection without ``startElement``, the
+    SSP 1.0 form of one from a system connector."""
+    for prefix in ("ssd", "ssc", "ssv"):
+        ET.register_namespace(prefix, NS[prefix])
+    ET.register_namespace("osp", "http://opensimulationplatform.com/SSP/OSPAnnotations")
+    root = ET.fromstring(ssd_bytes)
+    system = root.find("ssd:System", NS)
+    for connectors in system.findall("ssd:Connectors", NS):
+        system.remove(connectors)
+    connections = system.find("ssd:Connections", NS)
+    ends = set()
+    for c in list(connections) if connections is not None else []:
+        if not c.get("startElement") or not c.get("endElement"):
+            connections.remove(c)
+        else:
+            ends.add((c.get("endElement"), c.get("endConnector")))
+    fed = {(c.get("endElement"), c.get("endConnector")) for c in ET.fromstring(ssd_bytes).iter(f"{{{NS['ssd']}}}Connection")
+           if not c.get("startElement") and c.get("endElement")}
+    for comp in system.findall("ssd:Elements/ssd:Component", NS):
+        declared = comp.find("ssd:Connectors", NS)
+        for c in list(declared) if declared is not None else []:
+            key = (comp.get("name"), c.get("name"))
+            if key in fed and key not in ends:
+                declared.remove(c)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def osp_ssp(ssp: Path, out: Path | None = None) -> Path:
+    """The SSP archive ``ssp`` for libcosim and ecos: the same members, its
+    SystemStructure.ssd without system connectors (:func:`without_system_connectors`),
+    written to ``out`` (default: ``osp/<name>.ssp`` beside ``ssp``) unless that is
+    already newer than ``ssp``; return its path."""
+    ssp = Path(ssp)
+    out = Path(out) if out is not None else ssp.parent / OSP_FOLDER / ssp.name
+    if out.is_file() and out.stat().st_mtime >= ssp.stat().st_mtime:
+        return out
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_suffix(f".{os.getpid()}.tmp")
+    with zipfile.ZipFile(ssp) as src, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as dst:
+        for item in src.infolist():
+            data = src.read(item.filename)
+            if item.filename == "SystemStructure.ssd":
+                data = without_system_connectors(data)
+            dst.writestr(item, data)
+    tmp.replace(out)
+    return out
+
+
+def pack_ssp(ssd: Path, fmu_dir: Path, out: Path, system_connectors: bool = True) -> Path:
     """Zip ``ssd`` as SystemStructure.ssd with the FMUs (from ``fmu_dir``) and parameter
-    sets (beside ``ssd``) that it references under ``resources/``."""
+    sets (beside ``ssd``) that it references under ``resources/``.  With
+    ``system_connectors=False`` the SSD goes in without its system connectors
+    (:func:`without_system_connectors`: the form libcosim and ecos read)."""
     ssd = Path(ssd)
     loose = unconnected_inputs(ssd)
     if loose:
@@ -111,8 +188,12 @@ def pack_ssp(ssd: Path, fmu_dir: Path, out: Path) -> Path:
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_suffix(".tmp")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
-        z.write(ssd, "SystemStructure.ssd")
+        if system_connectors:
+            z.write(ssd, "SystemStructure.ssd")
+        else:
+            z.writestr("SystemStructure.ssd", without_system_connectors(ssd.read_bytes()))
         written = set()
+        cut: dict[str, list[str]] = {}      # parameter set -> components given their part of it
         for source, component in referenced_sources(ssd):
             if source in written:           # one FMU serving several components is packed once
                 continue
@@ -126,6 +207,11 @@ def pack_ssp(ssd: Path, fmu_dir: Path, out: Path) -> Path:
             if part is None:
                 raise BuildError(f"{ssd}: references {source}, but {origin} does not exist")
             z.writestr(source, part)
+            cut.setdefault(name[: -len(f"_{component}.ssv")], []).append(component)
+        for set_name, components in cut.items():
+            member = f"resources/{set_name}.ssv"
+            if member not in written:
+                z.writestr(member, system_parameter_set(ssd.parent, set_name, components))
     tmp.replace(out)
     return out
 

@@ -1,7 +1,7 @@
 """Running FMUs: one instance by variable name (``instance``); the SSP system and the
 co-simulation master join here."""
 from .instance import FmuError, FmuInstance
-from .master import CoSimulation, simulate_ssp
+from .master import CoSimulation, fmpy_input, simulate_ssp
 from .ssv import SspError
 
-__all__ = ["CoSimulation", "FmuError", "FmuInstance", "SspError", "simulate_ssp"]
+__all__ = ["CoSimulation", "FmuError", "FmuInstance", "SspError", "fmpy_input", "simulate_ssp"]

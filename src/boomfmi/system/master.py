@@ -8,9 +8,15 @@ transformations are applied on every connection, the FMUs start from their own s
 values, and every result row is stamped with the time its values belong to, starting
 with a row at t0.
 
-Inputs that no connection drives (``valve.u``, ``boom_load.f_ext``) and the system's
-own input connectors are the run's inputs: they take the values given to
-:meth:`CoSimulation.simulate`, or keep their start values.
+Inputs that no connection drives (``boom_load.f_ext``) and the system's own input
+connectors (``u``, wired to ``valve.u``) are the run's inputs: they take the values
+given to :meth:`CoSimulation.simulate`, or keep their start values.  A system input
+connector is fed by the command as fmpy feeds it, and reaches the component inputs it
+is connected to through the connection's linear transformation; the run lists it by
+the component inputs it feeds (``valve.u``, the name it had before the SSDs declared
+system connectors) and accepts either name.  The master takes each input at the
+communication points only: a command that changes between two points is applied from
+the next one on (a table's row at 0.3005 s, at a 1 ms step, from 0.301 s).
 
 Time is kept as an integer number of nanoseconds, as libcosim does, so that long runs
 do not drift and the step sizes handed to the FMUs are those libcosim hands them.
@@ -161,18 +167,36 @@ class CoSimulation:
             for o in self.outputs[n]:
                 slot_of(n, o)
         driven = {(c.end_element, c.end_connector) for c in s.connections if c.end_element}
-        # the run's inputs: system input connectors, and component inputs nothing drives
-        self.inputs: list[str] = [c for c, kind in s.connectors.items() if kind in ("input", "parameter")]
+        # the run's inputs: the system's input connectors, each named by the component
+        # inputs it feeds (valve.u, fed by the system connector u: the names a system
+        # without connectors gives them), and the component inputs nothing drives.
+        # _input_map: a name the caller may give -> (slot, factor, offset), the slot
+        # holding (value - offset) / factor; a system connector's own name is one too.
+        self.inputs: list[str] = []
+        self._input_map: dict[str, tuple[int, float, float]] = {}
+        self._system_inputs: dict[str, list[tuple[str, float, float]]] = {}
+        for c, kind in s.connectors.items():
+            if kind not in ("input", "parameter"):
+                continue
+            i = slot_of(SYSTEM, c)
+            fed = [(f"{conn.end_element}.{conn.end_connector}", conn.factor, conn.offset)
+                   for conn in s.connections
+                   if conn.start_element == SYSTEM and conn.start_connector == c and conn.end_element]
+            self._system_inputs[c] = fed
+            named = [(name, f, o) for name, f, o in fed if f != 0.0]   # a factor of 0 cuts the input off
+            for name, f, o in named:
+                self.inputs.append(name)
+                self._input_map[name] = (i, f, o)
+            if not named:
+                self.inputs.append(c)
+            self._input_map[c] = (i, 1.0, 0.0)
         free: dict[str, list[str]] = {n: [] for n in names}
         for n in names:
             for v in self.instances[n].model_description.modelVariables:
                 if v.causality == "input" and v.type == "Real" and (n, v.name) not in driven:
                     free[n].append(v.name)
                     self.inputs.append(f"{n}.{v.name}")
-        self._input_slot = {}
-        for name in self.inputs:
-            element, _, connector = name.rpartition(".")
-            self._input_slot[name] = slot_of(element, connector)
+                    self._input_map[f"{n}.{v.name}"] = (slot_of(n, v.name), 1.0, 0.0)
 
         incoming: dict[str, dict[str, tuple[int, float, float]]] = {n: {} for n in names}
         for n in names:
@@ -245,7 +269,8 @@ class CoSimulation:
         """Run from the start time to ``stop_time`` [s]; return one row per
         communication point, t0 included.
 
-        ``inputs`` drives the run's inputs (``valve.u``, or a system connector's name):
+        ``inputs`` drives the run's inputs (``valve.u``, or the system connector ``u``
+        that feeds it: one of the two names), each read at the communication points:
         a mapping of constants, a callable ``inputs(t) -> {name: value}``, or a
         DataFrame with a ``t`` (or ``time``) column whose rows hold from their time to
         the next.  An input not given keeps its start value.  ``monitor(columns, row)``,
@@ -271,7 +296,7 @@ class CoSimulation:
             raise ValueError(f"stop time {t_end:g} s is {n_steps:.3g} steps of {self.step_size:g} s; a run may have "
                              f"at most {MAX_STEPS:,} (MAX_STEPS: {MAX_STEPS * self.step_size / 3600:.3g} h at this "
                              f"step, its rows held in memory): run it in parts")
-        source = _input_source(inputs, self.inputs)
+        source = _input_source(inputs, list(self._input_map))
 
         by_comp: dict[str, dict] = {n: {} for n in self.instances}
         for name, p in s.parameters.items():
@@ -281,8 +306,12 @@ class CoSimulation:
             inst.initialize(by_comp[n], start_time=t0, stop_time=t_end)
 
         values = [0.0] * self.n_slots
-        for name, i in self._input_slot.items():
-            values[i] = self._input_start(name)
+        system_slots = {self._input_map[c][0] for c in self._system_inputs}
+        for c in self._system_inputs:
+            values[self._input_map[c][0]] = self._input_start(c)
+        for name in self.inputs:
+            if self._input_map[name][0] not in system_slots:
+                values[self._input_map[name][0]] = self._input_start(name)
         for n in self.instances:
             self._read(n, self._all_read, values)
         columns, record = self._recording()
@@ -290,14 +319,14 @@ class CoSimulation:
         m = len(record)
         take = _gather(record)
         bar = _Progress(t_end - t0, progress)
-        input_slots = [(name, self._input_slot[name]) for name in self.inputs]
+        input_slots = list(self._input_map.items())
         feed_buffer = list(values)
 
         def take_inputs(t: float) -> None:
             given = source(t)
-            for name, i in input_slots:
+            for name, (i, f, o) in input_slots:
                 if name in given:
-                    values[i] = float(given[name])
+                    values[i] = (float(given[name]) - o) / f
 
         def record_row(k: int, t: float) -> None:
             # feedthrough outputs at t, from the inputs at t; Jacobi keeps them out of
@@ -319,6 +348,7 @@ class CoSimulation:
                 rows[k, j:j + len(vrs)] = got
                 j += len(vrs)
 
+        self._check_one_name_per_input(source(t0))
         take_inputs(t0)
         record_row(0, t0)
         order = self.step_order
@@ -351,27 +381,41 @@ class CoSimulation:
 
     def _input_start(self, name: str) -> float:
         """A run's input starts at its parameter binding's value, else at the start value
-        of the FMU input it is (or it drives)."""
+        of the FMU input it is.  A system input connector starts at its own binding, else
+        at the first one of the component inputs it feeds (their binding, else their
+        start value) has, through the connection's transformation."""
         bound = self.structure.parameters.get(name)
         if bound is not None:
             return float(bound.value)
-        element, _, connector = name.rpartition(".")
-        if element:
+        fed = self._system_inputs.get(name)
+        if fed is None:
+            element, _, connector = name.rpartition(".")
             var = self.instances[element].variables[connector]
             return float(var.start) if var.start is not None else 0.0
-        for conn in self.structure.connections:
-            if conn.start_element == SYSTEM and conn.start_connector == connector and conn.end_element:
-                var = self.instances[conn.end_element].variables[conn.end_connector]
-                start = float(var.start) if var.start is not None else 0.0
-                return (start - conn.offset) / conn.factor if conn.factor else 0.0
+        for target, f, o in fed:
+            if f != 0.0:
+                return (self._input_start(target) - o) / f
         return 0.0
+
+    def _check_one_name_per_input(self, given) -> None:
+        """Refuse inputs that set one system input connector under two names (``u`` and
+        the ``valve.u`` it feeds)."""
+        by_slot: dict[int, str] = {}
+        for name in given:
+            slot = self._input_map.get(name, (None,))[0]
+            if slot is None:
+                continue
+            if slot in by_slot:
+                raise ValueError(f"the inputs give {by_slot[slot]!r} and {name!r}, one system input connector "
+                                 f"under two names: give one of them")
+            by_slot[slot] = name
 
     def _recording(self):
         """Columns: time, the run's inputs, system outputs, then every component output."""
         columns, record = ["time"], []
         for name in self.inputs:
             columns.append(name)
-            record.append((self._input_slot[name], 1.0, 0.0))
+            record.append(self._input_map[name])
         for c, (i, f, o) in self.system_outputs.items():
             columns.append(c)
             record.append((i, f, o))
@@ -400,6 +444,40 @@ def simulate_ssp(ssp, stop_time=None, step: float = 1e-3, algorithm: str = "gaus
     """Load, run and close an SSP system in one call (see :class:`CoSimulation`)."""
     with CoSimulation(ssp, step, algorithm, parameters) as cosim:
         return cosim.simulate(stop_time, inputs, progress=progress)
+
+
+def fmpy_input(ssp, inputs, step: float, start_time: float = 0.0) -> dict[str, Callable[[float], float]]:
+    """``inputs`` (as :meth:`CoSimulation.simulate` takes them: a mapping of constants, a
+    callable ``inputs(t) -> {name: value}`` such as a named profile, or a table) as the
+    ``input`` argument of fmpy's SSP runner (``fmpy.ssp.simulation.simulate_ssp``): one
+    function of time per system input connector of ``ssp`` that ``inputs`` gives.
+
+    fmpy's runner adds the step to a float time, and calls each function at that float
+    (0.30000000000000004, or 2.9999999999999996 for 3 s): a command that changes at a
+    communication point would land a step late wherever the float falls short of it.
+    These functions read the command at the communication point nearest the float they
+    are given, so the valves get the command of the step's start whatever float fmpy
+    sends, as boomfmi's master gives it (a change between two points from the next one
+    on).  fmpy hands a system input's value to the components it feeds a step later than
+    the master does, but its first step is idle (every connector starts at 0), which
+    puts the two back in step: fmpy's row k holds the master's row k.
+    """
+    if not (isinstance(step, (int, float)) and math.isfinite(step) and step > 0):
+        raise ValueError(f"the communication step must be > 0 s, not {step!r}")
+    structure = read_ssp(ssp)
+    names = [c for c, kind in structure.connectors.items() if kind in ("input", "parameter")]
+    if not names:
+        raise ValueError(f"{structure.path}: declares no system input connector for fmpy to drive")
+    source = _input_source(inputs, names)
+    given = [n for n in names if n in source(float(start_time))]
+    if not given:
+        raise ValueError(f"the inputs give none of {structure.path.name}'s system input connectors "
+                         f"{', '.join(names)}")
+    t0, h = float(start_time), float(step)
+
+    def at_point(name: str) -> Callable[[float], float]:
+        return lambda t: float(source(t0 + round((t - t0) / h) * h)[name])
+    return {name: at_point(name) for name in given}
 
 
 #: Parameters that name one physical quantity of the machine wherever a component
