@@ -72,7 +72,7 @@ def test_wiring(excavator_ssp):
     assert sorted(comps) == sorted([f"{k}_{j}" for k in ("valve", "cylinder") for j in JOINTS] + ["linkage"])
     conns = {(c.get("startElement"), c.get("startConnector"), c.get("endElement"), c.get("endConnector"))
              for c in root.iter(f"{{{NS['ssd']}}}Connection")}
-    assert len(conns) == 4 * 10
+    assert len(conns) == 4 * 10 + 4                             # + u_<joint> -> valve_<joint>.u
     for j in JOINTS:
         assert ("cylinder_" + j, "p_a", "linkage", f"p_a_{j}") in conns
         assert ("linkage", f"x_{j}", "cylinder_" + j, "x") in conns
@@ -164,7 +164,8 @@ def test_libcosim_runs_it_and_agrees_with_the_jacobi_master(excavator_ssp):
     from libcosimpy.CosimManipulator import CosimManipulator
     from libcosimpy.CosimObserver import CosimObserver
     log_output_level(CosimLogLevel.WARNING)
-    ex = CosimExecution.from_ssp_file(str(excavator_ssp), step_size=1_000_000)
+    from boomfmi.fmubuild.ssp import osp_ssp     # libcosim refuses system connectors
+    ex = CosimExecution.from_ssp_file(str(osp_ssp(excavator_ssp)), step_size=1_000_000)
     names = [f"{k}_{j}" for k in ("valve", "cylinder") for j in JOINTS] + ["linkage"]
     idx = {n: ex.slave_index_from_instance_name(n) for n in names}
     ref = {(n, v.name.decode()): v.reference for n, i in idx.items() for v in ex.slave_variables(i)}
@@ -224,7 +225,8 @@ def test_ecos_runs_it(excavator_ssp, tmp_path):
     env = {k: v for k, v in os.environ.items()
            if not k.startswith("PYTHON") and k not in ("LD_PRELOAD", "BOOMFMI_LIBPYTHON", "VIRTUAL_ENV")}
     env.update(LD_LIBRARY_PATH=os.path.join(sys.prefix, "lib"), TMPDIR=str(tmp_path))
-    proc = subprocess.run([str(exe), "simulate", "--path", str(excavator_ssp), "--stepSize", "0.001",
+    from boomfmi.fmubuild.ssp import osp_ssp     # ecos refuses system connectors
+    proc = subprocess.run([str(exe), "simulate", "--path", str(osp_ssp(excavator_ssp)), "--stepSize", "0.001",
                            "--stopTime", "1.5", "--parameterSet", "excavator",
                            "--scenarioConfig", "scenario.xml", "--csvConfig", "csv.xml"],
                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
@@ -268,14 +270,13 @@ def test_cosimulation_within_one_percent_of_the_monolithic_reference(excavator_s
 
 
 def test_fmpy_wires_the_connections_the_ssd_declares(excavator_ssp):
-    """fmpy's SSP reader resolves exactly the SSD's forty connections (no undeclared
-    free input for it to mis-wire)."""
+    """fmpy's SSP reader resolves exactly the SSD's forty-four connections (no undeclared
+    free input for it to mis-wire; a system connector is named bare, u_swing)."""
     fmpy_ssd = pytest.importorskip("fmpy.ssp.ssd")
     from boomfmi.system.ssp import read_ssp
     ssd = fmpy_ssd.read_ssd(str(excavator_ssp))
     cut = len(ssd.system.name) + 1
     theirs = {(fmpy_ssd.build_path(a)[cut:], fmpy_ssd.build_path(b)[cut:])
               for a, b in fmpy_ssd.get_connections(ssd.system)}
-    ours = {(f"{c.start_element}.{c.start_connector}", f"{c.end_element}.{c.end_connector}")
-            for c in read_ssp(excavator_ssp).connections}
-    assert theirs == ours and len(ours) == 40
+    ours = {tuple(c.describe().split(" -> ")) for c in read_ssp(excavator_ssp).connections}
+    assert theirs == ours and len(ours) == 44             # 40 + the system's u_<joint> -> valve_<joint>.u

@@ -9,11 +9,19 @@ Eq. 8 to 12 per cylinder): mass matrix, Coriolis and gravity of the four joints,
 cylinder acting through its lever arm, Eq. 9 friction and hard end stops per cylinder,
 the tip force through the Jacobian transpose.  Within a step the inputs are held and the
 motion is integrated in short substeps (``advance_linkage``).
+
+Each cylinder's friction carries the catalogue's friction effects as options of its own
+(``v_s_<joint>``, ``c_friction_sum_<joint>``, ...: the boom_load FMU's options with the
+joint's suffix, ``fmislave.effect_options``), applied through a :class:`Boom` of that
+joint (``model.excavator_reference.friction_hook``), so that any friction effect runs on
+any joint.
 """
 import math
 from dataclasses import replace
 
-from boomfmi_linkage_lib.fmislave import L_MAX, BoomSlave, input, output, parameter
+from boomfmi_linkage_lib.fmislave import L_MAX, BoomSlave, effect_options, input, option_values, output, parameter
+from boomfmi_linkage_lib.model import Boom, Model, effects_from_options
+from boomfmi_linkage_lib.model.excavator_reference import friction_hook
 from boomfmi_linkage_lib.physics import reference_rig
 from boomfmi_linkage_lib.physics.excavator import (JOINTS, LINKS, Excavator, Link, advance_linkage,
                                                    angles_and_tip, check_excavator)
@@ -93,6 +101,7 @@ class Linkage(BoomSlave):
         parameter("P_atm", reference_rig.P_atm, "Pa", "atmospheric pressure (it acts on the rods)", min=0.0),
         parameter("payload", 0.0, "kg", "payload in the bucket, at the bucket's centre of mass", min=0.0),
         parameter("max_substep", 2.5e-4, "s", "longest integration substep", min=1e-6, max=1e-2),
+        *(v for j in JOINTS for v in effect_options("boom_load", j)),
     )
 
     def __init__(self, **kwargs):
@@ -103,6 +112,7 @@ class Linkage(BoomSlave):
         self._v = [0.0] * 4
         self._q = [0.0] * 4
         self._tip = (0.0, 0.0, 0.0)
+        self._friction = None
 
     def setup(self):
         acts = {}
@@ -126,6 +136,10 @@ class Linkage(BoomSlave):
             if not 0.0 <= x0 <= L:
                 raise ParameterError(f"x0_{j}", x0, f"must lie within the stroke [0, {L:g}] m")
         self._ex = ex
+        hooks = [friction_hook(Boom(Model(load=ex.load(j), P_atm=ex.P_atm,
+                                          effects=effects_from_options("boom_load", option_values(self, "boom_load", j))),
+                                    check=False), ex.load(j)) for j in JOINTS]
+        self._friction = hooks if any(hooks) else None
         self._x = [float(getattr(self, f"x0_{j}")) for j in JOINTS]
         self._v = [0.0] * 4
         self._update()
@@ -137,7 +151,8 @@ class Linkage(BoomSlave):
         p_a = [self.p_a_swing, self.p_a_boom, self.p_a_arm, self.p_a_bucket]
         p_b = [self.p_b_swing, self.p_b_boom, self.p_b_arm, self.p_b_bucket]
         x, v = advance_linkage((self._x, self._v), p_a, p_b, (self.f_tip_x, self.f_tip_y, self.f_tip_z), dt,
-                               self._ex, payload=self.payload, max_substep=self.max_substep)
+                               self._ex, payload=self.payload, max_substep=self.max_substep,
+                               friction=self._friction)
         self._x = x.tolist()
         self._v = v.tolist()
         self._update()

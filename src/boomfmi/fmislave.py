@@ -159,16 +159,22 @@ def rig_parameters(*names: str) -> Tuple[Variable, ...]:
     return tuple(RIG_PARAMETERS[n] for n in dict.fromkeys(names))
 
 
-def effect_options(fmu: str) -> Tuple[Variable, ...]:
+def effect_options(fmu: str, joint: str = "") -> Tuple[Variable, ...]:
     """The parameter rows of FMU ``fmu``'s effect options, from the catalogue of effects
-    (each off at its start value)."""
+    (each off at its start value); with ``joint``, one joint's copy of them
+    (``v_s_arm``, the excavator's linkage: its cylinders' friction)."""
+    if joint:
+        return tuple(parameter(f"{p.option}_{joint}", p.start, p.unit, f"{joint} cylinder, {p.description}",
+                               min=0.0, max=p.max) for e in of_fmu(fmu) for p in e.parameters)
     return tuple(parameter(p.option, p.start, p.unit, p.description, min=0.0, max=p.max)
                  for e in of_fmu(fmu) for p in e.parameters)
 
 
-def option_values(slave, fmu: str) -> dict:
-    """``{option: value}`` of FMU ``fmu``'s effect options on the instance ``slave``."""
-    return {p.option: getattr(slave, p.option) for e in of_fmu(fmu) for p in e.parameters}
+def option_values(slave, fmu: str, joint: str = "") -> dict:
+    """``{option: value}`` of FMU ``fmu``'s effect options on the instance ``slave``
+    (with ``joint``: of that joint's copy, :func:`effect_options`)."""
+    suffix = f"_{joint}" if joint else ""
+    return {p.option: getattr(slave, p.option + suffix) for e in of_fmu(fmu) for p in e.parameters}
 
 
 def _values_of(names):

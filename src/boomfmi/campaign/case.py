@@ -5,7 +5,9 @@ no view of the client's files: a cluster's workers on other machines get the sam
 input.  :func:`run_case` writes them into a temporary folder, runs the identification
 (``params.json`` with the 95 % intervals, ``params.ssv``, ``params.png``) and the
 diagnosis (``diagnosis.json``, ``report.html``, its PNGs) exactly as ``boomfmi
-identify`` and ``boomfmi diagnose`` do, and returns every file written, with the
+identify`` and ``boomfmi diagnose`` do (a case of the whole excavator's recordings: its
+diagnosis, ``diagnose.excavator_report``, which identifies the baseline per joint and
+writes ``diagnosis.json`` and ``report.html``), and returns every file written, with the
 temporary paths in their texts put back to the recordings' own, and a summary for the
 campaign's trends.  A case that fails returns its error (never raises): the rest of
 the campaign goes on.
@@ -56,7 +58,7 @@ def case_spec(case, ssp=None) -> dict:
     if ssp:                  # the confirmation's system (none given: the default's, as before)
         part = f"ssp={ssp}".encode()
         digest.update(len(part).to_bytes(8, "little") + part)
-    return {"machine": case.machine, "date": case.date, "files": files,
+    return {"machine": case.machine, "date": case.date, "files": files, "kind": getattr(case, "kind", "boom"),
             "ssp": str(ssp) if ssp else None, "fingerprint": digest.hexdigest()}
 
 
@@ -108,7 +110,10 @@ def run_case(spec: dict) -> dict:
             paths[f["role"]].append(p)
         out = tmp / "out"
         try:
-            result["summary"] = _identify_and_diagnose(paths["fit"], paths["holdout"], out, spec.get("ssp"), log)
+            if spec.get("kind", "boom") == "excavator":
+                result["summary"] = _diagnose_excavator(paths["fit"], paths["holdout"], out, log)
+            else:
+                result["summary"] = _identify_and_diagnose(paths["fit"], paths["holdout"], out, spec.get("ssp"), log)
             result["status"] = "done"
         except Exception as e:            # reported with the case, never raised: the campaign goes on
             result["error"] = _restore(f"{type(e).__name__}: {e}", sources)
@@ -169,6 +174,45 @@ def _identify_and_diagnose(fit, hold, out, ssp, log) -> dict:
     conf = doc.get("confirmation") or {}
     summary["confirmation"] = {k: conf[k] for k in ("shrink", "reference_shrink", "agrees", "skipped", "error")
                                if k in conf}
+    return summary
+
+
+def _diagnose_excavator(fit, hold, out, log) -> dict:
+    """A case of the whole excavator's recordings: its diagnosis
+    (``diagnose.excavator_report.diagnose_excavator_recordings``), summarised as a boom
+    case is: the baseline's per-joint parameters (``K_v_arm``, ..., ``payload``; those
+    identification cannot tell marked so), the holdouts' NRMSE per joint and channel
+    (``p_a_arm``), and each fitted effect on its joint (``piston_leakage@arm``, as the
+    verdict names it) with the gap it removes on that joint's cut (``gain``) and that
+    joint's threshold (``margin``, for the trends' flag rule)."""
+    from ..diagnose.excavator_report import diagnose_excavator_recordings
+    doc = diagnose_excavator_recordings(fit, hold, out, progress=log.append)
+    summary = {"kind": "excavator", "judgeable": doc.get("judgeable", True), "verdict": doc["verdict"]}
+    if not summary["judgeable"]:
+        summary["reason"] = doc.get("reason")
+        return summary
+    b = doc["baseline"]
+    cannot = b.get("cannot_tell") or {}
+    summary["params"] = {k: {"value": plain(float(v)), "ci95": plain(b["ci95"].get(k) or [None, None]),
+                             "unit": b["units"].get(k), "identified": k not in cannot}
+                         for k, v in b["params"].items()}
+    summary["nrmse_holdout"] = {f"{c}_{j}": e for j, row in b["nrmse_holdout"].items() for c, e in row.items()}
+    thresholds: dict = {}
+    for w in doc["where"]:
+        thresholds.setdefault(w["joint"], []).append(float(w["threshold"]))
+    margin = {j: sum(v) / len(v) for j, v in thresholds.items()}
+    summary.update(gap_threshold=round(max(margin.values(), default=0.0), 6), warnings=b.get("warnings", []),
+                   where=doc["where"][:1])
+    summary["effects"] = {}
+    for e in doc["effects"]:          # best first per joint and cut: the first of a name on a joint
+        key = f"{e['name']}@{e['joint']}"
+        if key in summary["effects"] or e.get("gap_after") is None:
+            continue
+        summary["effects"][key] = {"params": e["params"], "shrink": e["shrink"],
+                                   "gain": round(float(e["gap_before"]) - float(e["gap_after"]), 6),
+                                   "margin": round(margin.get(e["joint"], 0.0), 6)}
+    conf = doc.get("confirmation") or {}
+    summary["confirmation"] = {k: conf[k] for k in ("shrink", "shrink_by_joint", "skipped", "error") if k in conf}
     return summary
 
 

@@ -22,9 +22,15 @@ holdout recordings diagnosed together, as ``boomfmi diagnose`` does.
 :func:`read_manifest` checks everything that can be checked before any work starts
 and raises :class:`ManifestError` naming the file, the line and the column of each
 fault: a missing column, an empty field, an unknown role, a date that is not ISO 8601,
-a recording or sidecar that is not there, a recording whose header is not a boom
-recording's, a sidecar its recording's reader would refuse (``recording.read_sidecar``),
-a recording listed twice, a case with no fit or no holdout recording.
+a recording or sidecar that is not there, a recording whose header is neither a boom
+recording's nor the whole excavator's, a sidecar its recording's reader would refuse
+(``recording.read_sidecar``), a recording listed twice, a case with no fit or no holdout
+recording, a case or a machine whose recordings are of both kinds.
+
+A case of boom recordings is identified and diagnosed as ``boomfmi identify`` and
+``boomfmi diagnose`` do; a case of excavator recordings by the whole machine's
+diagnosis (``diagnose.excavator_report``), its per-joint parameters (``K_v_arm``...)
+in the trends.
 """
 from __future__ import annotations
 
@@ -66,6 +72,7 @@ class Entry:
     role: str                 #: "fit" or "holdout"
     recording: Path           #: resolved
     sidecar: Path | None      #: resolved; None: the recording's own NAME.json, if any
+    kind: str = "boom"        #: the recording's kind (``recording.recording_kind``): boom or excavator
 
 
 @dataclass
@@ -81,6 +88,11 @@ class Case:
 
     def role(self, role: str) -> list[Entry]:
         return [e for e in self.entries if e.role == role]
+
+    @property
+    def kind(self) -> str:
+        """Its recordings' kind (the manifest's reader refuses a case of both)."""
+        return self.entries[0].kind if self.entries else "boom"
 
     @property
     def folder(self) -> Path:
@@ -194,7 +206,7 @@ def read_manifest(path) -> Manifest:
             bad = True
         else:
             seen[rec] = line
-            problem = _check_header(rec)
+            problem, kind = _check_header(rec)
             if problem:
                 problems.append(f"line {line}, column recording: {get['recording']}: {problem}")
                 bad = True
@@ -206,7 +218,7 @@ def read_manifest(path) -> Manifest:
                 problems.append(f"line {line}, column sidecar: {get['sidecar']}: {problem}")
                 bad = True
         if not bad:
-            entries.append(Entry(line, get["machine"], when, role, rec, side))
+            entries.append(Entry(line, get["machine"], when, role, rec, side, kind))
     if not entries and not problems:
         problems.append("no recordings listed below the header")
     cases: dict[tuple, Case] = {}
@@ -221,6 +233,15 @@ def read_manifest(path) -> Manifest:
                                 f"{c.date} has no {role} recording (only {other}); "
                                 + ("the diagnosis measures every shrink on a holdout recording"
                                    if role == "holdout" else "the baseline is identified on the fit recordings"))
+    kinds: dict[str, list] = {}
+    for c in cases.values():
+        for e in c.entries:
+            kinds.setdefault(c.machine, []).append(e)
+    for machine, listed in kinds.items():   # a case, and a machine's trends, are of one kind of recording
+        if len({e.kind for e in listed}) > 1:
+            by = {k: ", ".join(str(e.line) for e in listed if e.kind == k) for k in ("boom", "excavator")}
+            problems.append(f"machine {machine!r}: lines {by['boom']} are boom recordings and lines "
+                            f"{by['excavator']} the whole excavator's; a machine's recordings are of one kind")
     folders: dict[Path, str] = {}
     for c in cases.values():          # two texts that one folder would hold (a date and a date-time)
         if folders.setdefault(c.folder, c.label) != c.label:
@@ -232,26 +253,27 @@ def read_manifest(path) -> Manifest:
     return Manifest(path, ordered)
 
 
-def _check_header(rec: Path) -> str | None:
-    """What is wrong with a recording's header row, where a look at it tells (the full
-    reading comes with its case): a campaign diagnoses the boom's recordings, so the
-    boom's required columns (``recording.KINDS``), and no excavator column, which would
-    make the reader take it for the whole excavator's."""
+def _check_header(rec: Path) -> tuple[str | None, str]:
+    """``(problem, kind)``: what is wrong with a recording's header row, where a look at
+    it tells (the full reading comes with its case), and its kind
+    (``recording.recording_kind``: any excavator column makes it the whole excavator's):
+    the kind's required columns (``recording.KINDS``)."""
     try:
         header = read_header(rec)
     except RecordingError as e:
-        return e.message
+        return e.message, "boom"
     except OSError as e:
-        return f"cannot be read ({e.strerror})"
-    missing = [c for c in KINDS["boom"]["required"] if c not in header]
-    if missing:
+        return f"cannot be read ({e.strerror})", "boom"
+    kind = recording_kind(header)
+    missing = [c for c in KINDS[kind]["required"] if c not in header]
+    if missing and kind == "boom":
         return (f"not a boom recording (recording-format.md): no column {', '.join(missing)} "
-                f"in its header ({', '.join(repr(h) for h in header[:8])})")
-    if recording_kind(header) != "boom":
+                f"in its header ({', '.join(repr(h) for h in header[:8])})"), kind
+    if missing:
         other = next(h for h in header if h in KINDS["excavator"]["required"] and h != "t")
-        return (f"not a boom recording (recording-format.md): its header has the whole excavator's column "
-                f"{other!r} (shared/spec/excavator.md); a campaign diagnoses the boom's")
-    return None
+        return (f"not a whole excavator's recording (shared/spec/excavator.md), which its column {other!r} "
+                f"makes it: no column {', '.join(missing)} in its header"), kind
+    return None, kind
 
 
 def _check_sidecar(side: Path) -> str | None:

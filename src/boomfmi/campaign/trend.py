@@ -67,7 +67,9 @@ def effect_size(summary: dict, name: str) -> tuple[float, float, bool]:
     """(size, its interval's half-width, named in the verdict) of ``name`` on a date."""
     e = (summary.get("effects") or {}).get(name)
     gain = float(e["gain"]) if e else 0.0
-    return gain, float(summary.get("gap_threshold") or 0.0), name in (summary.get("verdict") or [])
+    margin = e.get("margin") if e else None           # an excavator's effect: its joint's threshold
+    margin = float(summary.get("gap_threshold") or 0.0) if margin is None else float(margin)
+    return gain, margin, name in (summary.get("verdict") or [])
 
 
 def effect_move(at: dict, ref: dict, name: str) -> bool:
@@ -109,6 +111,8 @@ def machine_trends(cases: list[dict]) -> dict:
         return out
     ref = judged[0]["summary"]
     names = [k for k in PARAMS if any(k in (c["summary"].get("params") or {}) for c in judged)]
+    # the whole excavator's per-joint parameters (K_v_arm, ..., payload), in their summaries' order
+    names += list(dict.fromkeys(k for c in judged for k in (c["summary"].get("params") or {}) if k not in PARAMS))
     for k in names:
         own = [(c["date"], (c["summary"].get("params") or {}).get(k) or {}) for c in judged]
         # the reference: the first date on which identification could tell the parameter

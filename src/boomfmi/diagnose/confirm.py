@@ -11,6 +11,11 @@ Each effect's FMU option comes from the catalogue (``model/catalogue.py``).  Sen
 is the hardware bridge's option, on the measurement path: on the model's side it is the
 same dead time and first-order lag (``model.measure``) applied to the co-simulation's
 outputs.
+
+The whole excavator's verdicts are confirmed the same way through ``excavator.ssp``
+(:func:`confirm_machine`): each joint's effects on its own FMUs (``valve_<joint>``,
+``cylinder_<joint>``, the linkage's options of that joint's cylinder), the per-joint
+NRMSE before and after, and the shrink.
 """
 from __future__ import annotations
 
@@ -81,3 +86,95 @@ def agreement(doc: dict, reference_shrink: float) -> dict:
     agree within :data:`AGREEMENT`."""
     return dict(doc, reference_shrink=round(reference_shrink, 4),
                 agrees=bool(abs(doc["shrink"] - reference_shrink) < AGREEMENT))
+
+
+# ------------------------------------------------------------------ the whole excavator
+def machine_parameters(values: dict, effects_by_joint: dict, rec) -> dict:
+    """``excavator.ssp``'s parameters for the excavator holdout ``rec``: the identified
+    friction and payload (``K_v_<joint>``, ``F_s_<joint>``, ``F_d_<joint>``, ``payload``
+    as ``identify.excavator`` names them; those not given keep the SSP's), the start
+    where the recording starts (each piston from its first angles, each chamber's
+    pressures absolute) and each joint's effects as its FMUs' options
+    (``model.excavator_reference.joint_fmu_variable``: ``valve_arm.tau_spool``,
+    ``cylinder_arm.C_leak``, ``linkage.v_s_arm``; sensor_lag is applied to the outputs)."""
+    from ..identify.excavator_outputs import START_WINDOW, machine_for, measured_pistons, ssp_name
+    from ..model.excavator_reference import check_joint_effects, joint_fmu_variable
+    from ..physics.excavator import JOINTS
+    ex = machine_for(rec)
+    check_joint_effects(effects_by_joint, ex)
+    params = {ssp_name(k): float(v) for k, v in values.items()
+              if k == "payload" or any(k == f"{q}_{j}" for q in ("K_v", "F_s", "F_d") for j in JOINTS)}
+    d = rec.data
+    t = d["t"].to_numpy(float)
+    n0 = max(1, int(START_WINDOW / float(np.median(np.diff(t)))))
+    x0 = np.clip(measured_pistons(d.iloc[:n0], ex).mean(axis=0), 0.0, ex.strokes)
+    P_atm = float(getattr(rec, "P_atm", ex.P_atm))
+    for i, j in enumerate(JOINTS):
+        params[f"linkage.x0_{j}"] = float(x0[i])
+        params[f"cylinder_{j}.p_a0"] = float(d[f"p_a_{j}"].iloc[:n0].mean()) + P_atm
+        params[f"cylinder_{j}.p_b0"] = float(d[f"p_b_{j}"].iloc[:n0].mean()) + P_atm
+    for j, effects in effects_by_joint.items():
+        for name, p in effects.items():
+            for k, v in p.items():
+                where = joint_fmu_variable(name, k, j)
+                if where is not None:
+                    params[where] = float(v)
+    return params
+
+
+def run_machine_fmus(ssp, values: dict, effects_by_joint: dict, rec) -> dict:
+    """``excavator.ssp`` on the recording's commands (:func:`machine_parameters`): per
+    joint ``x_<j>``, ``p_a_<j>``, ``p_b_<j>`` (gauge) on its samples, each joint with
+    sensor_lag seen through it (its pressures and angle lagged, x from the lagged angle,
+    as the excavator's bridge measures)."""
+    from ..identify.excavator_outputs import machine_for
+    from ..physics.excavator import JOINTS, pistons_from_angles
+    out = run_experiment(ssp, str(rec.path), parameters=[machine_parameters(values, effects_by_joint, rec)])
+    t = rec.data["t"].to_numpy(float)
+    ts = out["t"].to_numpy(float)
+    sim = {f"{q}_{j}": np.interp(t, ts, out[f"{q}_{j}"].to_numpy(float))
+           for j in JOINTS for q in ("x", "p_a", "p_b", "angle")}
+    lagged = {j: effects_by_joint.get(j, {}).get("sensor_lag", {}) for j in JOINTS}
+    lagged = {j: q for j, q in lagged.items() if q.get("tau", 0.0) > 0.0 or q.get("delay", 0.0) > 0.0}
+    if lagged:
+        for j, q in lagged.items():
+            for c in (f"p_a_{j}", f"p_b_{j}", f"angle_{j}"):
+                sim[c] = measure(sim[c], t, q.get("tau", 0.0), q.get("delay", 0.0))
+        pistons = pistons_from_angles(np.column_stack([sim[f"angle_{j}"] for j in JOINTS]), machine_for(rec))
+        for i, j in enumerate(JOINTS):
+            if j in lagged:
+                sim[f"x_{j}"] = pistons[:, i]
+    return sim
+
+
+def confirm_machine(values: dict, effects_by_joint: dict, rec, ssp=None, effect_values: dict | None = None) -> dict:
+    """The excavator holdout ``rec`` through ``excavator.ssp`` (default: the build
+    folder's, ``paths.built``), co-simulated by our master on its recorded commands from
+    its start state: once with the identified ``values`` alone and once with each joint's
+    effects (``effects_by_joint``: ``{"arm": {"piston_leakage": {"C": 2e-11}}}``) set on
+    its FMUs (``effect_values``: the friction and payload with the effects, where they
+    were identified anew with them; default ``values``).  Returns per joint the NRMSE of
+    x, p_a, p_b before and after (``identify.excavator_outputs.excavator_nrmse``), each
+    joint's ``shrink`` and the ``shrink`` over every channel of the joints with effects
+    (:func:`compare.shrink`); ``skipped`` (why) where the SSP is not built.  A joint that
+    is none, or an effect parameter that is not the catalogue's, raises
+    :class:`physics.ParameterError` naming it (``effects.arm.piston_leakage.C``)."""
+    from ..identify.excavator_outputs import excavator_nrmse, machine_for
+    from ..model.excavator_reference import check_joint_effects
+    ssp = Path(ssp) if ssp is not None else built("excavator.ssp")
+    ex = machine_for(rec)
+    check_joint_effects(effects_by_joint, ex)
+    if not ssp.is_file():
+        return {"ssp": str(ssp), "skipped": "the SSP is not built (python build_fmus.py)"}
+    before = excavator_nrmse(run_machine_fmus(ssp, values, {}, rec), rec, ex)
+    doc = {"ssp": str(ssp), "recording": str(rec.path),
+           "nrmse_holdout_baseline": {j: {c: round(v, 6) for c, v in row.items()} for j, row in before.items()}}
+    if effects_by_joint:
+        after = excavator_nrmse(run_machine_fmus(ssp, effect_values or values, effects_by_joint, rec), rec, ex)
+        joints = [j for j in before if j in effects_by_joint]
+        doc.update({"effects": effects_by_joint,
+                    "nrmse_holdout_after": {j: {c: round(v, 6) for c, v in row.items()} for j, row in after.items()},
+                    "shrink_by_joint": {j: round(shrink(before[j], after[j]), 4) for j in before},
+                    "shrink": round(shrink({f"{c}_{j}": before[j][c] for j in joints for c in before[j]},
+                                           {f"{c}_{j}": after[j][c] for j in joints for c in after[j]}), 4)})
+    return doc

@@ -20,6 +20,15 @@ of the sixteen combinations' transitions, and Eq. 9's stick test couples the joi
 through M; the fine fixed step is the same stick/slip logic as the linkage FMU's, at a
 step where its error is negligible.
 
+Effects of the catalogue (``model/catalogue.py``) act on any joint
+(:attr:`ExcavatorMachine.effects`: joint -> effects, as a boom :class:`Model`'s): each
+joint's pneumatics step through a :class:`~.boom.Boom` of that joint's valve and cylinder
+(its spool, opening, valve flows, inflows and chambers: the one pneumatic implementation
+the boom's FMUs and reference share), its friction effects act in ``advance_linkage``
+through a per-joint friction hook (:func:`friction_hook`: the catalogue's ``friction``
+stage on that cylinder's K_v, F_s, F_d) and its sensor lag on the sampled channels the
+excavator's bridge measures (``p_a``, ``p_b``, ``angle``; ``x`` follows the lagged angle).
+
 The machine starts at rest with every piston at mid-stroke and every valve closed
 (5 V), each cylinder's chambers at pressures that hold its joint against gravity
 (:func:`holding_pressures`), so the digging cycle starts from a still machine.
@@ -30,11 +39,14 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
-import pandas as pd
 
 from .. import physics as ph
+from ..physics import effects as fx
 from ..physics import reference_rig
-from ..physics.excavator import JOINTS, Excavator, advance_linkage, excavator_parameters, joint_angles
+from ..physics.excavator import (JOINTS, Excavator, advance_linkage, excavator_parameters, joint_angles,
+                                 pistons_from_angles)
+from .boom import Boom, Model, check_effects
+from .catalogue import EFFECTS
 
 
 def holding_pressures(ex: Excavator, x0, p_b0: float | None = None, payload: float = 0.0):
@@ -59,7 +71,9 @@ def holding_pressures(ex: Excavator, x0, p_b0: float | None = None, payload: flo
 @dataclass(frozen=True)
 class ExcavatorMachine:
     """The whole machine for the reference: the linkage's constants, the valves' and the
-    gas's (the reference rig's, each valve with its joint's A_max), and the start."""
+    gas's (the reference rig's, each valve with its joint's A_max), the start, and each
+    joint's effects (checked by :meth:`check`: a joint that is none, or an effect or
+    parameter that is not the catalogue's, is refused naming it)."""
     ex: Excavator = field(default_factory=excavator_parameters)
     gas: ph.Gas = field(default_factory=ph.Gas)
     P_s: float = reference_rig.P_s
@@ -68,10 +82,29 @@ class ExcavatorMachine:
     x0: tuple | None = None          #: start positions [m] (default: mid-stroke)
     p_a0: tuple | None = None        #: start pressures [Pa] (default: holding_pressures)
     p_b0: tuple | None = None
+    #: joint -> its effects, as a boom :class:`Model`'s (``{"arm": {"piston_leakage": {"C": 2e-11}}}``)
+    effects: dict = field(default_factory=dict)
 
     @property
     def valves(self) -> tuple:
         return tuple(ph.Valve(A_max=a.A_max, P_s=self.P_s, P_e=self.P_e) for a in self.ex.actuators)
+
+    def check(self) -> None:
+        """Raise :class:`physics.ParameterError` naming the first bad joint or effect
+        parameter (``effects.arm.piston_leakage.C``)."""
+        check_joint_effects(self.effects, self.ex)
+
+    def joint_model(self, joint: str) -> Model:
+        """Joint ``joint``'s valve, cylinder, friction and effects as a boom :class:`Model`
+        (the geometry is the boom's: only the boom's load uses it)."""
+        j = JOINTS.index(joint)
+        return Model(valve=self.valves[j], gas=self.gas, cylinder=self.cylinders[j], geometry=self.ex.geometry,
+                     load=self.ex.load(joint), P_atm=self.ex.P_atm, effects=dict(self.effects.get(joint, {})))
+
+    def booms(self) -> tuple:
+        """One :class:`Boom` per joint (checked first: :meth:`check`)."""
+        self.check()
+        return tuple(Boom(self.joint_model(j), check=False) for j in JOINTS)
 
     @property
     def cylinders(self) -> tuple:
@@ -88,6 +121,59 @@ class ExcavatorMachine:
         return x0, p_a0, p_b0
 
 
+def check_joint_effects(effects, ex: Excavator | None = None) -> None:
+    """``effects`` maps joints of the excavator to a boom :class:`Model`'s effects
+    (``model.check_effects``); raise :class:`physics.ParameterError` naming the joint
+    that is none or the effect's parameter under its joint (``effects.arm.piston_leakage.C``).
+    With ``ex``, an end cushion's port must fit the joint's dead volumes."""
+    if not isinstance(effects, dict):
+        raise ph.ParameterError("effects", effects, f"must map joints ({', '.join(JOINTS)}) to their effects")
+    for joint, eff in effects.items():
+        if joint not in JOINTS:
+            raise ph.ParameterError("effects", joint, f"not a joint of the excavator ({', '.join(JOINTS)})")
+        if not isinstance(eff, dict):
+            raise ph.ParameterError(f"effects.{joint}", eff, "must map effect names to their parameters")
+        try:
+            check_effects(eff)
+            if ex is not None:
+                V_p = float(eff.get("end_cushioning", {}).get("V_p", 0.0))
+                fx.check_cushion_port(V_p, getattr(ex, joint).cylinder, "effects.end_cushioning.V_p")
+        except ph.ParameterError as e:
+            reason = str(e).split(" is invalid: ", 1)[-1]
+            raise ph.ParameterError(e.name.replace("effects", f"effects.{joint}", 1), e.value, reason) from None
+
+
+def joint_fmu_variable(effect: str, parameter: str, joint: str) -> str | None:
+    """The excavator SSP's name of joint ``joint``'s effect parameter: its valve's or
+    cylinder's option (``valve_arm.tau_spool``, ``cylinder_arm.C_leak``), or the
+    linkage's option for that joint's cylinder (``linkage.v_s_arm``: the boom_load FMU's
+    friction options, suffixed); ``None`` for the sensors (the bridge's, on the
+    measurement path: ``model.measure`` on the outputs)."""
+    if joint not in JOINTS:
+        raise ph.ParameterError("joint", joint, f"not a joint of the excavator ({', '.join(JOINTS)})")
+    e = EFFECTS[effect]
+    option = next(p.option for p in e.parameters if p.name == parameter)
+    if e.stage == "measurement":
+        return None
+    if e.fmu == "boom_load":
+        return f"linkage.{option}_{joint}"
+    return f"{e.fmu}_{joint}.{option}"
+
+
+def friction_hook(boom: Boom, load: ph.Load):
+    """The ``friction`` argument's entry of ``advance_linkage`` for one joint: its
+    cylinder's ``load`` (K_v, F_s, F_d) through ``boom``'s friction effects
+    (:meth:`Boom.load_at`) at the piston's speed and pressures; ``None`` where it has
+    none (the linkage's constant levels)."""
+    if not boom.friction_effects:
+        return None
+
+    def hook(v: float, p_a: float, p_b: float):
+        ld = boom.load_at(load, v, p_a, p_b)
+        return ld.K_v, ld.F_s, ld.F_d
+    return hook
+
+
 def simulate_excavator_reference(command: Callable[[float], dict], stop_time: float,
                                  machine: ExcavatorMachine | None = None, h: float = 5e-5,
                                  sample: float = 1e-3, f_tip: Callable[[float], tuple] | None = None) -> pd.DataFrame:
@@ -97,14 +183,18 @@ def simulate_excavator_reference(command: Callable[[float], dict], stop_time: fl
 
     Returns ``time``, then per joint ``u_<j>``, ``p_a_<j>``, ``p_b_<j>`` (absolute [Pa]),
     ``x_<j>``, ``v_<j>``, ``angle_<j>``.  Each sample holds the state at its time and the
-    command applied from it."""
+    command applied from it; a joint with sensor_lag, its ``p_a``, ``p_b`` and ``angle``
+    as its sensors report them (``x`` from that angle).  ``machine.effects`` is checked
+    before any step (:class:`physics.ParameterError` naming the joint or parameter)."""
+    import pandas as pd        # (here: the linkage FMU bundles this module for friction_hook, without pandas)
     machine = machine or ExcavatorMachine()
-    ex, gas = machine.ex, machine.gas
+    ex = machine.ex
+    booms = machine.booms()
     per = int(round(sample / h))
     if per < 1 or abs(per * h - sample) > 1e-12 * sample:
         raise ValueError(f"the sample interval {sample} s must be a multiple of the step h = {h} s")
     n_samples = int(round(stop_time / sample))
-    valves, cyls = machine.valves, machine.cylinders
+    valves = machine.valves
     x, p_a, p_b = machine.start()
     x = [float(t) for t in x]
     v = [0.0] * 4
@@ -123,12 +213,17 @@ def simulate_excavator_reference(command: Callable[[float], dict], stop_time: fl
         out[i, 17:21] = v
 
     no_tip = (0.0, 0.0, 0.0)
-    closed = (0.0, 0.0)
+    closed = (0.0, 0.0, 0.0, 0.0)
     centre = valves[0].u_centre
     if any(float(ph.orifice_area(centre, va)) != 0.0 for va in valves):
         centre = None
-    flows, slopes = ph.chamber_flows, ph.chamber_flow_slopes
-    step_p = ph.chamber_pressure_step
+    hooks = [friction_hook(b, ex.load(j)) for b, j in zip(booms, JOINTS)]
+    friction = hooks if any(hooks) else None
+    spools = [b.tau_spool > 0.0 for b in booms]
+    cmd0 = command(0.0)
+    y = [float(cmd0[k]) for k in keys]                     # the spools' positions (valve_dynamics)
+    masses = [list(b.air_masses(p_a[j], p_b[j], x[j])) if b.h_wall > 0.0 else None
+              for j, b in enumerate(booms)]
     for i in range(n_samples):
         t0 = i * sample
         cmd = command(t0)
@@ -139,22 +234,27 @@ def simulate_excavator_reference(command: Callable[[float], dict], stop_time: fl
                 cmd = command(t)
             u = [float(cmd[k]) for k in keys]
             tip = no_tip if f_tip is None else f_tip(t)
-            mf, sl = [], []
+            mf = []
             for j in range(4):
-                if u[j] == centre:              # a closed valve passes nothing (A(u) = 0)
-                    mf.append(closed)
-                    sl.append(closed)
+                b = booms[j]
+                c = y[j] if spools[j] else u[j]
+                if b.command_effects:
+                    c = b.opening(c)
+                if c == centre:                 # a closed valve passes nothing (A(u) = 0)
+                    m = closed
                 else:
-                    mf.append(flows(u[j], p_a[j], p_b[j], valves[j], gas))
-                    sl.append(slopes(u[j], p_a[j], p_b[j], valves[j], gas))
-            x1, v1 = advance_linkage((x, v), p_a, p_b, tip, h, ex, payload=payload, max_substep=h)
+                    m = b.valve_flows(c, p_a[j], p_b[j])
+                if b.inflow_effects:
+                    m = b.inflows(*m, p_a[j], p_b[j], x[j])
+                mf.append(m)
+            x1, v1 = advance_linkage((x, v), p_a, p_b, tip, h, ex, payload=payload, max_substep=h,
+                                     friction=friction)
             for j in range(4):
-                c = cyls[j]
-                V_a0, V_b0 = c.A_a * x[j] + c.V_a0, c.A_b * (c.L - x[j]) + c.V_b0
-                x1j = float(x1[j])
-                V_a1, V_b1 = c.A_a * x1j + c.V_a0, c.A_b * (c.L - x1j) + c.V_b0
-                p_a[j] = step_p(p_a[j], V_a0, V_a1, float(mf[j][0]), h, gas, float(sl[j][0]))
-                p_b[j] = step_p(p_b[j], V_b0, V_b1, float(mf[j][1]), h, gas, float(sl[j][1]))
+                m_a, m_b, s_a, s_b = mf[j]
+                p_a[j], p_b[j] = booms[j].step_chambers(p_a[j], p_b[j], x[j], float(x1[j]), float(m_a), float(m_b),
+                                                        float(s_a), float(s_b), h, masses[j])
+                if spools[j]:
+                    y[j] = booms[j].spool_step(y[j], u[j], h)
             x = [float(t) for t in x1]
             v = [float(t) for t in v1]
     t_end = n_samples * sample
@@ -166,4 +266,13 @@ def simulate_excavator_reference(command: Callable[[float], dict], stop_time: fl
     angles = joint_angles(df[[f"x_{j}" for j in JOINTS]].to_numpy(), ex)
     for k, j in enumerate(JOINTS):
         df[f"angle_{j}"] = angles[:, k]
+    lagged = [k for k, b in enumerate(booms) if b.measures]
+    if lagged:                         # the sensors of the joints with sensor_lag (the bridge's channels)
+        time = df["time"].to_numpy()
+        for k in lagged:
+            for c in (f"p_a_{JOINTS[k]}", f"p_b_{JOINTS[k]}", f"angle_{JOINTS[k]}"):
+                df[c] = booms[k].measured(df[c].to_numpy(), time)
+        pistons = pistons_from_angles(df[[f"angle_{j}" for j in JOINTS]].to_numpy(), ex)
+        for k in lagged:
+            df[f"x_{JOINTS[k]}"] = pistons[:, k]
     return df

@@ -853,7 +853,7 @@ def _solve_step(Mx, f, v, Kv, h, S, fric):
 
 def advance_linkage(state, p_a, p_b, f_tip, dt: float, ex: Excavator = _DEFAULT,
                     payload: float = 0.0, max_substep: float = 2.5e-4, locked=(), forces=None,
-                    refresh: int = 1):
+                    refresh: int = 1, friction=None):
     """Advance the four-joint linkage ``dt`` [s] with held pressures and tip force.
 
     Parameters
@@ -872,6 +872,13 @@ def advance_linkage(state, p_a, p_b, f_tip, dt: float, ex: Excavator = _DEFAULT,
         The posture's terms (M_x, the bias, the lever arms, the tip force's torques) are
         evaluated at the first of every ``refresh`` substeps and kept over the others
         (1: every substep).
+    friction : 4-sequence of callables or None, optional
+        Per joint, the friction of its cylinder where an effect changes it (the
+        ``friction`` stage of the catalogue of effects: a Stribeck curve, the seals'
+        pressure): ``friction[j](v, p_a, p_b) -> (K_v, F_s, F_d)`` at the joint's piston
+        speed [m/s] and absolute chamber pressures [Pa], evaluated at each substep's
+        start and frozen over it (as ``physics.advance_load``'s ``load_at``); ``None``
+        (or a ``None`` entry): the excavator's constant K_v, F_s, F_d.
 
     Each substep (at most ``max_substep`` long) freezes M_x, the bias, the lever arms
     and the forces at its start and solves ``M_x (v' - v) = h (F - bias - K_v v' - F_c)``
@@ -896,6 +903,9 @@ def advance_linkage(state, p_a, p_b, f_tip, dt: float, ex: Excavator = _DEFAULT,
     v = [float(t) for t in state[1]]
     L, Kv, Fs, Fd = P.L, P.Kv, P.Fs, P.Fd
     lockset = {JOINTS.index(j) if isinstance(j, str) else int(j) for j in locked}
+    hooks = [(j, fn) for j, fn in enumerate(friction or ()) if fn is not None]
+    if hooks:                                       # per-substep levels: copies, P's are shared
+        Kv, Fs, Fd = list(Kv), list(Fs), list(Fd)
     if forces is None:
         A_a, A_b, P_atm = P.A_a, P.A_b, P.P_atm
         Fp = [float(p_a[j]) * A_a[j] - float(p_b[j]) * A_b[j] - P_atm * (A_a[j] - A_b[j]) for j in range(4)]
@@ -921,6 +931,9 @@ def advance_linkage(state, p_a, p_b, f_tip, dt: float, ex: Excavator = _DEFAULT,
                 f = [f[i] + lam[i] * tau[i] for i in range(4)]
             scale = (1.0, cos_phi, 1.0, 1.0)
             cap = [Fs[j] * scale[j] for j in range(4)]
+        for j, fn in hooks:
+            Kv[j], Fs[j], Fd[j] = fn(v[j], float(p_a[j]), float(p_b[j]))
+            cap[j] = Fs[j] * scale[j]
         S = set(lockset)
         direction = [0.0] * 4
         for j in range(4):
@@ -980,3 +993,46 @@ def advance_linkage(state, p_a, p_b, f_tip, dt: float, ex: Excavator = _DEFAULT,
                     vn[j] = 0.0
         x, v = xn, vn
     return np.array(x), np.array(v)
+
+
+# --- the machine from named values (a machine file, a sidecar, the linkage FMU) ------------
+
+#: An actuator's values by name, per joint as ``<field>_<joint>`` (the linkage FMU's names).
+ACTUATOR_FIELDS = ("bore", "rod", "stroke", "c1", "c2", "l_min", "lower", "A_max", "V_a0", "V_b0", "K_v", "F_s", "F_d")
+#: A link's values by name, as ``<field>_<link>`` (its inertia follows: a slender rod, m L^2 / 12).
+LINK_FIELDS = ("length", "mass", "com")
+#: The machine's own values by name.
+MACHINE_FIELDS = {"h": "boom_h", "pivot_forward": "pivot_forward", "pivot_height": "pivot_height", "P_atm": "P_atm"}
+
+
+def excavator_value_names() -> tuple:
+    """Every name :func:`excavator_from_values` takes (``lower_boom`` is not one: the
+    boom's angle is Eq. 12's own)."""
+    return (*(f"{f}_{j}" for j in JOINTS for f in ACTUATOR_FIELDS if not (f == "lower" and j == "boom")),
+            *(f"{f}_{n}" for n in LINKS for f in LINK_FIELDS), *MACHINE_FIELDS)
+
+
+def excavator_from_values(values: dict, base: Excavator = _DEFAULT) -> Excavator:
+    """``base`` with the named ``values`` [SI] in place (names of
+    :func:`excavator_value_names`), checked (:func:`check_excavator`, naming the value).
+    ``ParameterError`` for a name it does not know."""
+    known = set(excavator_value_names())
+    for k in values:
+        if k not in known:
+            raise ParameterError(k, values[k], "is not a value of the excavator (excavator.md): "
+                                               "<field>_<joint>, <field>_<link>, h, pivot_forward, pivot_height, P_atm")
+    acts = {}
+    for j in JOINTS:
+        mine = {f: float(values[f"{f}_{j}"]) for f in ACTUATOR_FIELDS if f"{f}_{j}" in values}
+        if mine:
+            acts[j] = replace(getattr(base, j), **mine)
+    links = {}
+    for n, link in zip(LINKS, base.links):
+        mine = {f: float(values[f"{f}_{n}"]) for f in LINK_FIELDS if f"{f}_{n}" in values}
+        if mine:
+            new = replace(link, **mine)
+            links[f"{n}_link"] = replace(new, inertia=_rod_inertia(new.mass, new.length))
+    own = {field_: float(values[k]) for k, field_ in MACHINE_FIELDS.items() if k in values}
+    ex = replace(base, **acts, **links, **own)
+    check_excavator(ex)
+    return ex
