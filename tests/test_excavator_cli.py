@@ -47,9 +47,12 @@ def runs(tmp_path_factory):
                      d / "dig.csv")
     leak_cfg = json.loads((ROOT / "examples" / "rig" / "excavator_arm_leakage.json").read_text())
     leak = _recording(run_excavator_offline(leak_cfg, LEAK, LEAK_SECONDS), d / "arm_leak.csv")
+    # diagnosis fits its candidates on the fit recordings: the leaking machine's own, another run
+    leak_fit = _recording(run_excavator_offline(dict(leak_cfg, seed=leak_cfg.get("seed", 0) + 1), CYCLE,
+                                                CYCLE.duration), d / "arm_leak_fit.csv")
     t = np.arange(200) * 1e-3
     boom = write_recording(d / "boom.csv", pd.DataFrame({"t": t, "u": 5.0, "p_a": 3e5, "p_b": 2e5, "alpha": 0.8}))
-    return {"dir": d, "fit": fit, "leak": leak, "boom": boom}
+    return {"dir": d, "fit": fit, "leak": leak, "leak_fit": leak_fit, "boom": boom}
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +66,7 @@ def identified(runs):
 @pytest.fixture(scope="module")
 def diagnosed(runs):
     out = runs["dir"] / "diag"
-    r = _cli("diagnose", runs["fit"], "--holdout", runs["leak"], "--out", out)
+    r = _cli("diagnose", runs["leak_fit"], "--holdout", runs["leak"], "--out", out)
     assert r.returncode == 0, r.stderr
     return r, json.loads((out / "diagnosis.json").read_text()), out
 

@@ -144,7 +144,8 @@ class Candidate:
 def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = None,
                 fixed: dict | None = None, forms: dict | None = None,
                 baseline_cost: float | None = None, max_evaluations: int = 40,
-                screen_only: bool = False, screened: tuple | None = None) -> tuple[dict, float]:
+                screen_only: bool = False, screened: tuple | None = None,
+                cost_of=None) -> tuple[dict, float]:
     """Fit the parameters of the effects ``names`` together on the fit recordings:
     ``({name: {param: value}}, cost)``.
 
@@ -160,7 +161,9 @@ def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = N
     the fit).  ``forms``: {name: [(param, lower, upper, log)]} in place of
     CANDIDATES[name].  ``screen_only``: the best screened point, not refined;
     ``screened``: ``(effects, cost)``, such a point from before, refined without a
-    screen anew."""
+    screen anew.  ``cost_of(effects) -> float``: the error to minimise in place of
+    :func:`fit_cost` on ``values`` and ``fit_recs`` (a cut of the model: the
+    excavator's per-joint diagnosis)."""
     spec = [(n, *s) for n in names for s in (forms or {}).get(n, CANDIDATES[n])]
 
     def to_effects(z):
@@ -170,6 +173,8 @@ def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = N
         return out
 
     def cost(z):
+        if cost_of is not None:
+            return cost_of(to_effects(z))
         return fit_cost(values, to_effects(z), fit_recs)
 
     bounds = [(math.log10(lo), math.log10(hi)) if log else (lo, hi) for _, _, lo, hi, log in spec]

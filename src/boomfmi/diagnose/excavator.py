@@ -1,62 +1,96 @@
-"""Diagnosis per joint of an excavator recording: which joint, and which effect.
+"""Diagnosis per joint of the whole excavator: which joint, which effect, how far it shrinks.
 
-**Localise.**  Each joint's pneumatics (its valve and its two chambers, the boom
-model's own ``model.Boom`` with that joint's valve and cylinder) run on the
-recording's command of that joint and its *measured* motion (the piston position
-from the measured angle), as ``localise.simulate_pneumatics`` does for the boom: the
-cut puts measured signals in place of the linkage's, so a pressure gap that remains is
-that joint's own, not carried over from a neighbour through the linkage.  Each joint's
-gap is the NRMSE of its two pressures (over their range in the recording), compared
-with that joint's noise floor (``attribute.noise_floor``'s law: the RMS of what a 50 Hz
-low-pass removes, over the range): a joint whose gap exceeds ``NOISE_FACTOR`` times its
-floor plus ``ABS_FLOOR`` (``attribute``'s margins) is flagged.
+**Two cuts per joint.**  Each joint is judged apart from the linkage, measured signals
+in place of its neighbours':
 
-**Attribute.**  On a flagged joint, every candidate of the catalogue
-(``model/catalogue.py``) that acts in that cut (the ``command``, ``port`` and ``seal``
-stages: valve deadband, end cushioning, piston leakage, with each of their laws) is
-fitted by output error of the joint's pneumatics, its parameters over the catalogue's
-bounds (``attribute.fit_effects``' screening then a bounded search, on a log scale
-where the catalogue says so); the best is named if it removes ``MIN_SHRINK`` of the
-joint's gap, else ``"unexplained"`` (an effect outside this cut, e.g. friction, which
-acts through the linkage).  The verdict lists ``"<effect>@<joint>"``; ``[]`` where no
-joint's gap exceeds its noise.
+* the **pneumatic cut**: the joint's valve and two chambers (the boom model's own
+  ``model.Boom`` with that joint's valve and cylinder, stepped as
+  ``localise.simulate_pneumatics`` steps the boom's) run on the joint's recorded
+  command and its *measured* motion (the piston position from the measured angle).
+  A pressure gap that remains is that joint's own, not carried over from a neighbour.
+  Its gap is the NRMSE of the two pressures (each over its range, as its sensor reads
+  it), summed;
+* the **load cut** (``diagnose/joint_load.py``, where it is installed): the joint as
+  an equivalent single cylinder, its measured pressures and the other joints' measured
+  motion in, its own motion out; its gap is the position's NRMSE.
 
-The cut needs no identified load: it does not run the linkage, so an effect on the
-joint's load (friction) shows here only through the motion it causes, which is
-measured; that is its limit.
+A cut is **flagged** on a holdout where its gap exceeds ``NOISE_FACTOR`` times that
+recording's own noise floor plus ``ABS_FLOOR`` (``attribute``'s margins).
+
+**Every effect on any joint.**  On a flagged cut each candidate of the catalogue
+(``model/catalogue.py``) that acts there is fitted **on the fit recordings' cuts** of that
+joint and scored **on the holdouts' cuts**, which are never fitted on:
+``shrink = 1 - gap_after / gap_before`` (the holdouts' mean gaps).  The pneumatic cut
+takes the effects of the stages ``spool`` (valve_dynamics: the spool's lag is a state of
+the cut), ``command``, ``port``, ``seal``, ``heat`` (the cut carries the air masses) and
+``measurement`` (sensor_lag: the cut's pressures as the sensors report them,
+``model.measure``; and, since the angle sensor lags alike, the cut is driven by the
+motion the measured angle lags behind, :func:`unlagged`; the lag is the data
+acquisition's, on every joint's channels as the excavator bridge's ``tau_sensor``, so
+what it makes worse on the other joints' holdout cuts counts against it: on one joint's
+cut alone a sensor's lag and a slow spool are the same delay of the pressures'
+answer to the command); the load cut the ``friction``
+stage's (stribeck_friction, pressure_friction, each law), with the joint's load
+re-identified with the effect on (``joint_load.fit_load_effect``), then the load (the
+baseline's as each candidate's) refined by the load cut's own output error on the fit
+recordings (:func:`refined_load`).  Every law of an
+effect is fitted as ``attribute`` fits the boom's: each law screened over the catalogue's
+bounds and refined (a bounded scalar search, or Nelder-Mead for several parameters), the
+best kept, a law that holds its parameters and more grown from its fit where it lowers
+the fit error by ``SCREEN`` (``attribute.fit_effects`` on the cut's error).
+
+**Pairs.**  On a cut where the best single effect removes less than ``MIN_SHRINK`` of
+the gap or leaves more than the noise margin, pairs among its ``PAIR_POOL`` best singles
+are fitted jointly (from the singles' fits, both halved, or the weaker screened beside
+the stronger's fit), kept where they remove ``MIN_SHRINK`` and each member pays for
+itself (``attribute._pays``).
+
+**Verdict.**  Each joint's findings, the joint furthest beyond its threshold first:
+``"<effect>@<joint>"`` per effect named, ``"unexplained@<joint>"`` for a flagged cut no
+candidate explains; ``[]`` where no joint's cut is flagged.
 """
 from __future__ import annotations
 
+import itertools
 import math
+import os
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from ..compare import as_sensed
 from ..identify.preprocess import lowpass
-from ..model import EFFECTS, Boom, Model
+from ..model import EFFECTS, Boom, Model, measure
 from ..physics import excavator as exc
-from .attribute import ABS_FLOOR, MIN_SHRINK, NOISE_FACTOR
+from .attribute import (ABS_FLOOR, CANDIDATES, FORMS, GROW, GROW_EVALUATIONS, MIN_SHRINK, MIN_SHRINK_SECOND,
+                        NOISE_FACTOR, PAIR_EVALUATIONS, PAIR_POOL, SCREEN, _halved, _map, _pays, fit_effects)
 from .localise import simulate_pneumatics
 
-#: the catalogue's effects that act inside one joint's pneumatics (the cut's stages)
-PNEUMATIC_STAGES = ("command", "port", "seal")
+#: the catalogue's stages that act inside one joint's pneumatics (the pneumatic cut)
+PNEUMATIC_STAGES = ("spool", "command", "port", "seal", "heat", "measurement")
+#: and on its load (the load cut)
+LOAD_STAGES = ("friction",)
 
 
-def pneumatic_candidates() -> dict:
-    """name -> its laws, each [(parameter, lower, upper, log)], of the effects in the cut
-    (one-parameter laws only: the cut's fits are scalar searches; a setting that does not
-    switch the effect, as the cushion's needle area, stays at the catalogue's start)."""
-    out = {}
-    for name, e in EFFECTS.items():
-        if e.stage not in PNEUMATIC_STAGES:
-            continue
-        forms = [[(p.name, p.lower, p.upper, p.log) for p in form if p.switch] for form in e.forms]
-        forms = [f for f in forms if len(f) == 1]
-        if forms:
-            out[name] = forms
+def candidates(stages=PNEUMATIC_STAGES) -> list[str]:
+    """The catalogue's effects that act in ``stages``, in the catalogue's order."""
+    return [name for name, e in EFFECTS.items() if e.stage in stages]
+
+
+def joint_forms(name: str, joint: str, ex: exc.Excavator = exc.Excavator()) -> list:
+    """The laws of effect ``name`` as fitted on ``joint``: [[(parameter, lower, upper,
+    log)]], the catalogue's bounds, a cushion's port volume kept below that joint's
+    dead volumes (``physics.effects.check_cushion_port``)."""
+    cyl = ex.actuators[exc.JOINTS.index(joint)].cylinder
+    out = []
+    for form in FORMS.get(name, [CANDIDATES[name]]):
+        f = []
+        for p, lo, hi, log in form:
+            if name == "end_cushioning" and p == "V_p":
+                hi = min(hi, 0.9 * min(cyl.V_a0, cyl.V_b0))
+            f.append((p, lo, hi, log))
+        out.append(f)
     return out
 
 
@@ -64,6 +98,7 @@ def joint_cut(data, joint: str, ex: exc.Excavator = exc.Excavator(), P_atm: floa
     """One joint's measured signals as ``localise.simulate_pneumatics`` takes them: t,
     u, x (from the measured angle, clipped to the stroke) and the pressures [Pa,
     absolute]."""
+    data = getattr(data, "data", data)
     P_atm = ex.P_atm if P_atm is None else P_atm
     i = exc.JOINTS.index(joint)
     q = np.column_stack([data[f"angle_{j}"].to_numpy(float) for j in exc.JOINTS])
@@ -75,7 +110,7 @@ def joint_cut(data, joint: str, ex: exc.Excavator = exc.Excavator(), P_atm: floa
     return SimpleNamespace(t=t, u=data[f"u_{joint}"].to_numpy(float), x=x, x_raw=x,
                            p_a_raw=data[f"p_a_{joint}"].to_numpy(float) + P_atm,
                            p_b_raw=data[f"p_b_{joint}"].to_numpy(float) + P_atm,
-                           fs=fs)
+                           fs=fs, L=float(ex.strokes[i]))
 
 
 def joint_model(joint: str, ex: exc.Excavator = exc.Excavator(), effects: dict | None = None) -> Boom:
@@ -95,7 +130,10 @@ def _span(m) -> float:
 
 
 def _gap(cut, pa, pb) -> float:
-    """NRMSE of the two pressures (each as its sensor would read it), summed."""
+    """NRMSE of the two pressures (each as its sensor would read it), summed; inf where
+    the model's pressures are not finite (parameters no machine has)."""
+    if not (np.all(np.isfinite(pa)) and np.all(np.isfinite(pb))):
+        return math.inf
     return sum(float(np.sqrt(np.mean((m - as_sensed(m, s)) ** 2)) / _span(m))
                for m, s in ((cut.p_a_raw, pa), (cut.p_b_raw, pb)))
 
@@ -105,13 +143,40 @@ def joint_noise(cut) -> float:
     return sum(float(np.std(m - lowpass(m, cut.fs, 50.0)) / _span(m)) for m in (cut.p_a_raw, cut.p_b_raw))
 
 
+def threshold(noise: float) -> float:
+    """The gap beyond which a cut is flagged: ``NOISE_FACTOR`` times its noise floor
+    plus ``ABS_FLOOR``."""
+    return NOISE_FACTOR * noise + ABS_FLOOR
+
+
+def unlagged(x, t, tau: float = 0.0, delay: float = 0.0, L: float | None = None) -> np.ndarray:
+    """The motion a sensor path of dead time ``delay`` [s] then first-order lag ``tau``
+    [s] (``model.measure``) turned into the measured ``x``: the lag undone
+    (``x + tau dx/dt``) and the signal moved ``delay`` earlier (held at the end);
+    clipped to the stroke ``L``."""
+    x = np.asarray(x, float)
+    y = x + tau * np.gradient(x, t) if tau > 0.0 else x
+    if delay > 0.0:
+        y = np.interp(t + delay, t, y)
+    return np.clip(y, 0.0, L) if L is not None else y
+
+
 def joint_pressures(cut, joint: str, ex: exc.Excavator = exc.Excavator(), effects: dict | None = None):
-    """The joint's pneumatics (with ``effects``) on the cut: ``(p_a, p_b)`` [Pa, absolute]."""
+    """The joint's pneumatics (with ``effects``) on the cut: ``(p_a, p_b)`` [Pa, absolute],
+    as the sensors report them."""
+    effects = dict(effects or {})
+    lag = effects.pop("sensor_lag", {})
+    tau, delay = float(lag.get("tau", 0.0)), float(lag.get("delay", 0.0))
     # the cut starts from the first 20 ms's mean pressures, not one noisy sample
     n0 = max(1, int(0.02 * cut.fs))
     start = SimpleNamespace(**{**vars(cut), "p_a_raw": np.r_[np.mean(cut.p_a_raw[:n0]), cut.p_a_raw[1:]],
                                "p_b_raw": np.r_[np.mean(cut.p_b_raw[:n0]), cut.p_b_raw[1:]]})
-    return simulate_pneumatics(start, joint_model(joint, ex, effects))
+    if tau > 0.0 or delay > 0.0:     # the angle lags as the pressures do: the cut moves as the piston did
+        start.x = unlagged(cut.x, cut.t, tau, delay, getattr(cut, "L", None))
+    pa, pb = simulate_pneumatics(start, joint_model(joint, ex, effects))
+    if tau > 0.0 or delay > 0.0:
+        pa, pb = measure(pa, cut.t, tau, delay), measure(pb, cut.t, tau, delay)
+    return pa, pb
 
 
 def joint_gap(cut, joint: str, ex: exc.Excavator = exc.Excavator(), effects: dict | None = None) -> float:
@@ -120,57 +185,423 @@ def joint_gap(cut, joint: str, ex: exc.Excavator = exc.Excavator(), effects: dic
     return _gap(cut, pa, pb)
 
 
+# ----------------------------------------------------------------------------- results
+@dataclass
+class Fitted:
+    """A candidate (one effect, or a pair ``"a+b"``) fitted on a joint's fit cuts."""
+    name: str
+    params: dict                 #: {effect: {parameter: value}}
+    fit_gap: float               #: the fit cuts' mean gap with it
+    hold_gaps: list              #: each holdout cut's gap with it
+    shrink: float                #: 1 - mean(hold_gaps) / the holdouts' mean gap before
+    values: dict | None = None   #: the joint's load re-identified with it (a friction effect)
+    not_fitted: str | None = None  #: why it could not be fitted (then no shrink)
+
+    @property
+    def names(self) -> list[str]:
+        return self.name.split("+")
+
+
+@dataclass
+class CutFinding:
+    """One cut of one joint on the holdouts."""
+    kind: str                    #: "pressures" (the pneumatic cut) or "position" (the load cut)
+    gaps: list                   #: each holdout's gap without effects
+    noises: list                 #: each holdout's noise floor
+    fit_gap: float = math.nan    #: the fit cuts' mean gap without effects
+    candidates: list = field(default_factory=list)   #: :class:`Fitted`, best first (a pair first where named)
+    verdict: list = field(default_factory=list)      #: effect names, or ["unexplained"]
+    values: dict | None = None   #: the load cut's joint load identified on the fit cuts
+    own_gaps: list | None = None  #: the load cut's gaps with the load identified on each holdout itself
+
+    @property
+    def thresholds(self) -> list:
+        return [threshold(n) for n in self.noises]
+
+    @property
+    def flagged(self) -> bool:
+        return any(g > h for g, h in zip(self.gaps, self.thresholds))
+
+    @property
+    def gap(self) -> float:
+        return float(np.mean(self.gaps))
+
+    @property
+    def noise(self) -> float:
+        return float(np.mean(self.noises))
+
+    @property
+    def excess(self) -> float:
+        """How far beyond its threshold the cut is, as a share of it (the worst holdout)."""
+        return max((g - h) / h for g, h in zip(self.gaps, self.thresholds))
+
+
 @dataclass
 class JointFinding:
     joint: str
-    gap: float                  #: summed NRMSE of the two pressures, the cut without effects
-    noise: float                #: the noise floor, summed
-    flagged: bool
-    candidates: list = field(default_factory=list)   #: (name, params, gap after, shrink), best first
-    verdict: str | None = None
+    pressures: CutFinding
+    position: CutFinding | None = None   #: None where the load cut is not available
+    load_note: str | None = None         #: why there is no load cut
+
+    @property
+    def flagged(self) -> bool:
+        return self.pressures.flagged or bool(self.position and self.position.flagged)
+
+    @property
+    def cuts(self) -> list:
+        return [c for c in (self.pressures, self.position) if c is not None]
+
+    @property
+    def named_cuts(self) -> list:
+        """The cuts whose findings are the joint's: the pneumatic cut's where it names an
+        effect, else the load cut's.  An effect on the pneumatics changes how the joint
+        holds and breaks away (a leak's creep, a deadband's closed chambers), which the
+        load cut, run on the measured pressures with a friction law's few parameters,
+        shows as a gap at its starts from rest that a friction law takes up; so there
+        the load cut's candidates are reported, not named (a friction effect on the same
+        joint as a pneumatic one is then missed: the price of no false friction)."""
+        named = lambda c: bool(c.verdict) and c.verdict != ["unexplained"]
+        if named(self.pressures):
+            return [self.pressures]
+        return [c for c in self.cuts if named(c)]
+
+    @property
+    def verdict(self) -> list[str]:
+        """The effects its cuts name (:attr:`named_cuts`); ``["unexplained"]`` only where
+        no cut names one and a cut is left unexplained."""
+        out = [n for c in self.named_cuts for n in c.verdict]
+        if not out and any(c.verdict == ["unexplained"] for c in self.cuts):
+            out = ["unexplained"]
+        return out
+
+    @property
+    def candidates(self) -> list:
+        return [c for cut in self.cuts for c in cut.candidates]
+
+    # the pneumatic cut's figures (the report's table and older callers)
+    @property
+    def gap(self) -> float:
+        return self.pressures.gap
+
+    @property
+    def noise(self) -> float:
+        return self.pressures.noise
 
 
 @dataclass
 class ExcavatorDiagnosis:
     joints: dict                #: joint -> JointFinding
     verdict: list               #: "<effect>@<joint>" (or "unexplained@<joint>")
+    notes: list = field(default_factory=list)
 
 
-def _fit(cut, joint, ex, name, form, gap0):
-    (param, lo, hi, log), = form
-    to = (lambda z: 10 ** z) if log else (lambda z: z)
-    zl, zh = (math.log10(lo), math.log10(hi)) if log else (lo, hi)
-    settings = {p.name: p.start for p in EFFECTS[name].parameters if not p.switch}   # at their start values
-    cost = lambda z: joint_gap(cut, joint, ex, {name: {**settings, param: float(to(z))}})
-    grid = np.linspace(zl, zh, 6)
-    costs = [cost(z) for z in grid]
-    k = int(np.argmin(costs))
-    best_z, best = grid[k], costs[k]
-    if best < gap0:
-        res = minimize_scalar(cost, bounds=(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]), method="bounded",
-                              options={"xatol": 0.02 * (zh - zl), "maxiter": 12})
-        if res.fun < best:
-            best_z, best = float(res.x), float(res.fun)
-    return {param: float(to(best_z))}, best
+# ----------------------------------------------------------------------------- fitting
+def _mean_gap(cuts, joint, ex, effects) -> float:
+    return float(np.mean([joint_gap(c, joint, ex, effects) for c in cuts]))
 
 
-def diagnose_excavator(data, ex: exc.Excavator = exc.Excavator(), joints=exc.JOINTS) -> ExcavatorDiagnosis:
-    """Localise the gap per joint and attribute it (see the module's docstring).
-    ``data``: an excavator recording (DataFrame, pressures gauge)."""
-    findings, verdict = {}, []
-    cands = pneumatic_candidates()
+def _hold_gaps(joint, ex, effects, hold_cuts, others) -> list:
+    """Each holdout's gap of ``joint``'s cut with ``effects``.  A measurement effect is
+    the data acquisition's (the bridge's sensor_lag lags every joint's channels): what
+    it makes worse on the other joints' cuts (``others``: [(joint, their holdout cuts,
+    their gaps without)]) is added to the joint's gap, so that a lag that only suits
+    one joint's pressures (as a slow spool's does) does not pass for the sensors'."""
+    gaps = [joint_gap(c, joint, ex, effects) for c in hold_cuts]
+    if any(EFFECTS[n].stage == "measurement" for n in effects):
+        lag = {n: q for n, q in effects.items() if EFFECTS[n].stage == "measurement"}
+        for other, cuts, before in others:
+            gaps = [g + max(joint_gap(c, other, ex, lag) - b, 0.0) for g, c, b in zip(gaps, cuts, before)]
+    return gaps
+
+
+def _fit_single(job):
+    """One effect of the pneumatic cut on one joint, every law (as ``attribute`` fits the
+    boom's): each simple law screened and refined, the best kept; a wider law grown from
+    its fit, kept where it lowers the fit error by ``SCREEN`` of it (a further parameter
+    pays for itself)."""
+    joint, name, ex, fit_cuts, hold_cuts, base, others = job
+    cost_of = lambda effects: _mean_gap(fit_cuts, joint, ex, effects)
+    forms = joint_forms(name, joint, ex)
+    laws = lambda form: {q[0] for q in form}
+    simple = [f for f in forms if not any(laws(g) < laws(f) for g in forms)]
+    # each simple law screened and refined (not only the best screened: a leak's orifice
+    # law has a narrow valley the screen's few points step over), the best kept
+    fits = [(*fit_effects([name], {}, None, forms={name: f}, baseline_cost=base, cost_of=cost_of), f)
+            for f in simple]
+    fx, cost, form = min(fits, key=lambda s: s[1])
+    if cost <= (1.0 - GROW) * base:      # (an effect that barely shows cannot tell its law's shape)
+        for wider in (f for f in forms if laws(form) < laws(f)):
+            more = [q for q in wider if q[0] not in laws(form)]
+            held, _ = fit_effects([name], {}, None, fixed={name: fx[name]}, forms={name: more},
+                                      screen_only=True, cost_of=cost_of)
+            fx_w, cost_w = fit_effects([name], {}, None, start=held, forms={name: wider},
+                                           max_evaluations=GROW_EVALUATIONS, cost_of=cost_of)
+            if cost_w < (1.0 - SCREEN) * cost:
+                fx, cost = fx_w, cost_w
+    return name, fx, cost, _hold_gaps(joint, ex, fx, hold_cuts, others)
+
+
+def _fit_pair(job):
+    """Two effects of the pneumatic cut on one joint, fitted jointly (``attribute._fit_pair``'s
+    starts: both singles' fits; both halved; the weaker screened beside the stronger's
+    fit); None where no start lowers the fit error below the better single's by SCREEN."""
+    joint, names, ex, fit_cuts, hold_cuts, start, single_costs, others = job
+    cost_of = lambda effects: _mean_gap(fit_cuts, joint, ex, effects)
+    forms = {n: [q for f in joint_forms(n, joint, ex) for q in f if q[0] in start[n]] for n in names}
+    forms = {n: list({q[0]: q for q in f}.values()) for n, f in forms.items()}
+    strong = min(names, key=lambda n: single_costs[n])
+    weak = next(n for n in names if n != strong)
+    enough = (1.0 - SCREEN) * min(single_costs.values())
+    starts = [(cost_of(start), start)]
+    halves = {n: {q: _halved(n, q, v) for q, v in start[n].items()} for n in names}
+    if starts[0][0] > enough and halves != start:
+        starts.append((cost_of(halves), halves))
+    if min(c for c, _ in starts) > enough:
+        held, c = fit_effects([weak], {}, None, fixed={strong: start[strong]}, forms={weak: forms[weak]},
+                                  screen_only=True, cost_of=cost_of)
+        starts.append((c, held))
+    at_start, begin = min(starts, key=lambda s: s[0])
+    if at_start > enough:
+        return None
+    fx, cost = fit_effects(list(names), {}, None, start=begin, max_evaluations=PAIR_EVALUATIONS, forms=forms,
+                               cost_of=cost_of)
+    if cost > at_start:
+        fx, cost = begin, at_start
+    return list(names), fx, cost, _hold_gaps(joint, ex, fx, hold_cuts, others)
+
+
+#: the load's output-error refinement: Nelder-Mead's evaluations at most, and its first
+#: steps (log10 of a factor on K_v, F_d, F_s)
+LOAD_EVALUATIONS = 40
+LOAD_STEP = 0.05
+
+
+def refined_load(jl, cuts, values: dict, effects: dict) -> tuple[dict, float]:
+    """The joint's load ``values`` (K_v, F_d, F_s, identified by ``joint_load``'s equation
+    and velocity errors) refined by the load cut's own output error on ``cuts`` with
+    ``effects`` held: ``(values, mean gap)``.  The baseline and every friction candidate
+    get the same refinement, so that a friction effect fitted by the cut's output error
+    is not compared with a load that was not (it would take up the load's misfit: a
+    Stribeck curve on an effect-free machine)."""
+    from scipy.optimize import minimize
+
+    def at(z):
+        K_v, F_d = values["K_v"] * 10 ** z[0], values["F_d"] * 10 ** z[1]
+        return dict(values, K_v=K_v, F_d=F_d, F_s=max(values["F_s"] * 10 ** z[2], F_d))
+
+    def cost(z):
+        return float(np.mean([jl.load_gap(c, at(z), effects) for c in cuts]))
+    z0 = np.zeros(3)
+    simplex = np.vstack([z0, *(LOAD_STEP * np.eye(3))])
+    res = minimize(cost, z0, method="Nelder-Mead",
+                   options={"maxfev": LOAD_EVALUATIONS, "initial_simplex": simplex, "xatol": 1e-3, "fatol": 1e-7})
+    c0 = cost(z0)
+    if not (res.fun < c0):
+        return dict(values), c0
+    return {k: float(v) for k, v in at(res.x).items()}, float(res.fun)
+
+
+def _fit_load(job):
+    """A friction effect on one joint's load cut (``joint_load.fit_load_effect``: the
+    joint's load re-identified at each value; then :func:`refined_load`), scored on the
+    holdouts' load cuts; the reason where it cannot be fitted."""
+    from . import joint_load as jl
+    _, joint, name, fit_cuts, hold_cuts = job
+    try:
+        params, values, _ = jl.fit_load_effect(fit_cuts, name)
+        fx = {name: params}
+        values, fit_gap = refined_load(jl, fit_cuts, values, fx)
+        return name, fx, fit_gap, [jl.load_gap(c, values, fx) for c in hold_cuts], values
+    except (ValueError, ArithmeticError) as e:
+        return f"{joint}'s load with {name}: {e}"
+
+
+def _fit_job(job):
+    if job[0] == "position":
+        return _fit_load(job)
+    return (*_fit_single(job[1:]), None)
+
+
+def _job_cost(job) -> float:
+    """A fit's rough cost, for scheduling: a friction effect's (the load identified at
+    each value) first, then the cushion's three parameters."""
+    if job[0] == "position":
+        return 1000.0 * len(EFFECTS[job[2]].forms)
+    if isinstance(job[1], (list, tuple)):
+        return 50.0
+    name = job[2] if job[0] == "pressures" else job[1]
+    return float(max(len(f) for f in FORMS.get(name, [CANDIDATES[name]])) ** 3 * len(FORMS.get(name, [None])))
+
+
+def _shrink(before: list, after: list) -> float:
+    b = float(np.mean(before))
+    return 1.0 - float(np.mean(after)) / b if b > 0.0 else 0.0
+
+
+def _needs_pair(cut: CutFinding) -> bool:
+    best = cut.candidates[0] if cut.candidates else None
+    if best is None or best.not_fitted:
+        return False
+    return best.shrink < MIN_SHRINK or float(np.mean(best.hold_gaps)) > threshold(cut.noise)
+
+
+def _pair_jobs(joint, cut: CutFinding, ex, fit_cuts, hold_cuts, others) -> list:
+    helped = [c for c in cut.candidates if c.shrink > 0.0 and not c.not_fitted][:PAIR_POOL]
+    combos = list(itertools.combinations(helped, 2))
+    if helped and helped[0].shrink >= MIN_SHRINK:
+        # the best explains the gap alone: a partner must show on its own at least half
+        # of what it would have to remove beside it (attribute._pairs' rule)
+        needed = MIN_SHRINK_SECOND * (float(np.mean(helped[0].hold_gaps)) - cut.noise)
+        combos = [(helped[0], c) for c in helped[1:] if cut.gap - float(np.mean(c.hold_gaps)) >= 0.5 * needed]
+    return [(joint, (a.name, b.name), ex, fit_cuts, hold_cuts, {a.name: a.params[a.name], b.name: b.params[b.name]},
+             {a.name: a.fit_gap, b.name: b.fit_gap}, others) for a, b in combos]
+
+
+def _decide(cut: CutFinding, pairs: list) -> None:
+    """The cut's verdict from its singles (sorted) and its fitted ``pairs``."""
+    if not cut.flagged:
+        return
+    by_name = {c.name: c for c in cut.candidates}
+    noise = cut.noise
+    best_pair = None
+    for p in pairs:
+        pays = all(_pays({"gap": float(np.mean(by_name[n].hold_gaps))}, {"gap": float(np.mean(p.hold_gaps))},
+                             noise) for n in p.names)
+        if p.shrink >= MIN_SHRINK and pays and (best_pair is None or p.shrink > best_pair.shrink):
+            best_pair = p
+    fitted = [c for c in cut.candidates if not c.not_fitted]
+    if best_pair is not None:
+        cut.candidates.insert(0, best_pair)
+        cut.verdict = best_pair.names
+    elif fitted and fitted[0].shrink >= MIN_SHRINK:
+        cut.verdict = [fitted[0].name]
+    else:
+        cut.verdict = ["unexplained"]
+
+
+def _own_load(f: JointFinding, jl, hold_cuts, notes: list) -> None:
+    """A load cut's gap that no friction candidate explains is ``unexplained`` only where
+    the joint's load identified on each holdout itself (no effect) still leaves it beyond
+    the threshold: a gap that this closes is the fit recordings' uncertainty of the load
+    (a static friction they did not pin), which is no finding (``attribute``'s rule for
+    a gap within the baseline's own uncertainty); where the holdout holds too little of
+    the joint's motion to identify its load there, the gap cannot be judged: no finding,
+    said in the notes.  Nothing is fitted on the holdout for a candidate's score."""
+    lc = f.position
+    try:
+        own = [refined_load(jl, [c], jl.identify_load([c], {}), {})[1] for c in hold_cuts]
+    except (ValueError, ArithmeticError) as e:
+        # the holdout holds too little of the joint's motion to tell a gap of its load
+        # from the load's own uncertainty: not judged, said
+        lc.verdict = []
+        notes.append(f"{f.joint}: the load cut's gap ({100 * lc.gap:.2f} %) cannot be judged: its load cannot be "
+                     f"identified on the holdout itself ({e}); not a finding")
+        return
+    lc.own_gaps = own
+    if all(g <= h for g, h in zip(own, lc.thresholds)):
+        lc.verdict = []
+        notes.append(f"{f.joint}: the load cut's gap ({100 * lc.gap:.2f} %) is within what the joint's load "
+                     f"identified on the holdout itself leaves ({100 * float(np.mean(own)):.2f} %): the fit "
+                     f"recordings do not pin the {f.joint}'s load, no friction effect explains it; not a finding")
+
+
+def _load_module():
+    """``diagnose.joint_load`` where it is installed, else ``(None, why)``."""
+    try:
+        from . import joint_load
+    except ImportError as e:
+        return None, (f"the joints' load cut (boomfmi.diagnose.joint_load) is not available ({type(e).__name__}): "
+                      f"the friction effects ({', '.join(candidates(LOAD_STAGES))}) are not fitted")
+    return joint_load, None
+
+
+def _frames(recs) -> list:
+    if recs is None:
+        return []
+    if hasattr(recs, "columns") or hasattr(recs, "data"):
+        return [recs]
+    return list(recs)
+
+
+def diagnose_excavator(fit, hold, ex: exc.Excavator = exc.Excavator(), joints=exc.JOINTS,
+                       workers: int | None = None, progress=None) -> ExcavatorDiagnosis:
+    """Localise the gap per joint and cut, and attribute it (see the module's docstring).
+    ``fit``, ``hold``: excavator recordings (``recording.Recording`` or DataFrames,
+    pressures gauge; one or a list each): candidates are fitted on ``fit``, scored and
+    flagged on ``hold``.  ``workers``: processes at once (default: one per core)."""
+    say = progress or (lambda text: None)
+    fit, hold = _frames(fit), _frames(hold)
+    if not fit or not hold:
+        raise ValueError("the excavator's diagnosis needs at least one fit and one holdout recording")
+    workers = workers or os.cpu_count() or 1
+    jl, load_note = _load_module()
+    notes = [load_note] if load_note else []
+    findings, fit_cuts, hold_cuts = {}, {}, {}
     for joint in joints:
-        cut = joint_cut(data, joint, ex)
-        gap0 = joint_gap(cut, joint, ex)
-        noise = joint_noise(cut)
-        flagged = gap0 > NOISE_FACTOR * noise + ABS_FLOOR
-        f = JointFinding(joint, gap0, noise, flagged)
-        if flagged:
-            for name, forms in cands.items():
-                best = min((_fit(cut, joint, ex, name, form, gap0) for form in forms), key=lambda r: r[1])
-                f.candidates.append((name, best[0], best[1], 1.0 - best[1] / gap0))
-            f.candidates.sort(key=lambda c: -c[3])
-            f.verdict = f.candidates[0][0] if f.candidates and f.candidates[0][3] >= MIN_SHRINK else "unexplained"
-            verdict.append(f"{f.verdict}@{joint}")
-        findings[joint] = f
-    return ExcavatorDiagnosis(findings, verdict)
+        fit_cuts[joint] = [joint_cut(r, joint, ex) for r in fit]
+        hold_cuts[joint] = [joint_cut(r, joint, ex) for r in hold]
+        pc = CutFinding("pressures", [joint_gap(c, joint, ex) for c in hold_cuts[joint]],
+                        [joint_noise(c) for c in hold_cuts[joint]])
+        findings[joint] = JointFinding(joint, pc, load_note=load_note)
+    # the load cuts (friction through the joint's load, re-identified on the fit recordings)
+    load_fit, load_hold = {}, {}
+    if jl is not None:
+        for joint in joints:
+            try:
+                load_fit[joint] = [jl.load_cut(r, joint, ex) for r in fit]
+                load_hold[joint] = [jl.load_cut(r, joint, ex) for r in hold]
+                values, fit_gap = refined_load(jl, load_fit[joint], jl.identify_load(load_fit[joint], {}), {})
+                lc = CutFinding("position", [jl.load_gap(c, values, {}) for c in load_hold[joint]],
+                                [jl.load_noise(c) for c in load_hold[joint]], values=values)
+                lc.fit_gap = fit_gap
+                findings[joint].position = lc
+            except (ValueError, ArithmeticError) as e:
+                findings[joint].load_note = f"{joint}'s load cut: {e}"
+                notes.append(findings[joint].load_note)
+    # every candidate on every flagged cut, at once
+    others = {j: [(o, hold_cuts[o], findings[o].pressures.gaps) for o in joints if o != j] for j in joints}
+    jobs = []
+    for joint, f in findings.items():
+        if f.pressures.flagged:
+            f.pressures.fit_gap = _mean_gap(fit_cuts[joint], joint, ex, {})
+            jobs += [("pressures", joint, name, ex, fit_cuts[joint], hold_cuts[joint], f.pressures.fit_gap,
+                      others[joint]) for name in candidates(PNEUMATIC_STAGES)]
+        if f.position is not None and f.position.flagged:
+            jobs += [("position", joint, name, load_fit[joint], load_hold[joint]) for name in candidates(LOAD_STAGES)]
+        elif f.position is None and f.flagged:
+            f.pressures.candidates += [Fitted(name, {}, math.nan, [], 0.0, not_fitted=f.load_note)
+                                       for name in candidates(LOAD_STAGES)]
+    flagged = [j for j, f in findings.items() if f.flagged]
+    say(f"flagged: {', '.join(flagged) or 'no joint'}; fitting {len(jobs)} candidate(s) on the fit recordings")
+    for job, out in zip(jobs, _map(_fit_job, jobs, workers, cost=_job_cost)):
+        cut = getattr(findings[job[1]], job[0])
+        if isinstance(out, str):
+            cut.candidates.append(Fitted(job[2], {}, math.nan, [], 0.0, not_fitted=out))
+            continue
+        name, fx, cost, gaps, values = out
+        cut.candidates.append(Fitted(name, fx, cost, gaps, _shrink(cut.gaps, gaps), values=values))
+    for joint, f in findings.items():
+        for c in f.cuts:
+            c.candidates.sort(key=lambda k: (k.not_fitted is not None, -k.shrink))
+    # pairs on the cuts whose best single leaves a gap
+    pair_jobs = [job for j, f in findings.items() if f.pressures.flagged and _needs_pair(f.pressures)
+                 for job in _pair_jobs(j, f.pressures, ex, fit_cuts[j], hold_cuts[j], others[j])]
+    if pair_jobs:
+        say(f"fitting {len(pair_jobs)} pair(s) of candidates")
+    pairs = {j: [] for j in findings}
+    for job, out in zip(pair_jobs, _map(_fit_pair, pair_jobs, workers, cost=_job_cost)):
+        if out is None:
+            continue
+        names, fx, cost, gaps = out
+        cut = findings[job[0]].pressures
+        pairs[job[0]].append(Fitted("+".join(names), fx, cost, gaps, _shrink(cut.gaps, gaps)))
+    for joint, f in findings.items():
+        _decide(f.pressures, pairs[joint])
+        if f.position is not None:
+            _decide(f.position, [])
+            if f.position.verdict == ["unexplained"]:
+                _own_load(f, jl, load_hold[joint], notes)
+    order = sorted((f for f in findings.values() if f.flagged),
+                   key=lambda f: -max(c.excess for c in f.cuts if c.flagged))
+    verdict = [f"{name}@{f.joint}" for f in order for name in f.verdict]
+    return ExcavatorDiagnosis(findings, verdict, notes)

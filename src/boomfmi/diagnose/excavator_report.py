@@ -3,18 +3,19 @@
 Follows ``shared/spec/diagnosis-report.md`` as far as it applies to the per-joint
 diagnosis of :mod:`boomfmi.diagnose.excavator` (read its docstring):
 
-- each HOLD recording is cut per joint: the joint's valve and chambers driven by its
-  recorded command and its *measured* motion; the joint's gap (the NRMSE of its two
-  pressures, summed) against its noise floor says whether that joint is flagged, and on
-  a flagged joint every candidate effect of the cut (valve deadband, end cushioning,
-  piston leakage) is fitted there, the best named if it removes ``MIN_SHRINK`` of the
-  gap, else ``unexplained``;
-- the FIT recordings identify the baseline (each cylinder's K_v, F_s, F_d and the
-  payload, ``identify.excavator_outputs``), reported with its 95 % intervals and the
-  whole identified machine's NRMSE per joint on the holdouts.  **The cut needs no
-  identified load** (it runs on the measured motion), so the baseline does not change
-  the verdict; it is required for the same command line as the boom's and tells how
-  far the whole identified machine is from each holdout.
+- each joint of each recording is cut off the linkage: its valve and chambers driven by
+  its recorded command and its *measured* motion (the pneumatic cut), and, where
+  ``diagnose/joint_load.py`` is installed, its load driven by its measured pressures and
+  the other joints' measured motion (the load cut).  On the HOLD recordings a cut's gap
+  against that recording's noise floor says whether the joint is flagged; on a flagged
+  joint every candidate of the catalogue acting in that cut is fitted on the FIT
+  recordings' cuts and scored on the holdouts' (``shrink`` = 1 - gap after / gap
+  before, the holdouts' mean), pairs where the best single leaves a gap;
+- the FIT recordings also identify the whole machine's baseline (each cylinder's K_v,
+  F_s, F_d and the payload, ``identify.excavator_outputs``), reported with its 95 %
+  intervals and its NRMSE per joint on the holdouts.  The cuts do not use it
+  (``used_by_verdict``: false): the pneumatic cut runs on the measured motion, the load
+  cut re-identifies its joint's load itself.
 
 ``diagnosis.json``: ``"kind": "excavator"``; ``baseline`` (``params``, ``ci95``,
 ``cannot_tell``, ``nrmse_holdout`` per joint and channel, averaged over the holdouts,
@@ -24,12 +25,16 @@ error) and ``channel_gaps``, ``regime`` (``whole_recording``: the cut is not bro
 down by regime), ``subsystem`` (the SSP's ``valve_<joint>, cylinder_<joint>``),
 ``gap``, ``noise_floor``, ``threshold``, ``flagged``, ``exercised`` (the piston moved
 1 mm or its valve opened), ``windows`` (the three 50 ms spans where the cut's residual
-is largest); ``effects``: every candidate fitted on a flagged joint, best first per
-joint, with ``params``, ``gap_after`` and ``shrink`` (no ``score``: the cut names the
-best candidate by its shrink alone); ``verdict``: ``"<effect>@<joint>"`` or
-``"unexplained@<joint>"`` over all holdouts (the joint with the largest gap first),
-``[]`` where no joint's gap exceeds its noise.  ``report.html`` is one self-contained
-page (its figures inline), with no request to any other place.
+is largest), ``position`` (the load cut's gap, where it runs); ``effects``: every
+candidate fitted on a flagged joint, best first per joint and cut: ``name`` (``a+b``
+for a pair), ``joint``, ``cut``, ``params`` and ``law`` (the parameters fitted),
+``fit_gap`` (and ``fit_gap_before``), ``gap_before`` and ``gap_after`` on the holdouts
+(and per holdout), ``shrink`` (the holdouts'), ``named``, ``not_fitted`` (why, where a
+candidate could not be fitted); ``verdict``: ``"<effect>@<joint>"`` or
+``"unexplained@<joint>"``, the joint furthest beyond its threshold first, ``[]`` where
+no joint's cut exceeds its noise; ``confirmation`` where ``confirm.confirm_machine``
+is installed: the named effects through ``excavator.ssp``.  ``report.html`` is one
+self-contained page (its figures inline), with no request to any other place.
 """
 from __future__ import annotations
 
@@ -55,9 +60,11 @@ from .localise import _windows
 from .report import OUTPUTS
 
 MIN_TRAVEL = 1e-3     #: [m] a piston that moves this much was exercised (the boom's diagnose.report)
-NOTE = ("The per-joint cut runs each joint's valve and chambers on the holdout's recorded command and measured "
-        "motion: it needs no identified load, so the baseline identified on the fit recordings does not change "
-        "the verdict; it is reported with the whole identified machine's error on each holdout.")
+NOTE = ("Each joint is cut off the linkage: its valve and chambers run on the recorded command and measured motion "
+        "(the pneumatic cut), and where the load cut is installed its load runs on the measured pressures and the "
+        "other joints' measured motion, re-identified on the fit recordings. The candidates are fitted on the fit "
+        "recordings' cuts and scored on the holdouts'. The whole machine's baseline identified on the fit "
+        "recordings is reported with its error on each holdout; the cuts do not use it.")
 
 
 def diagnose_excavator_recordings(fit_paths, hold_paths, out_dir, progress=None) -> dict:
@@ -75,8 +82,8 @@ def diagnose_excavator_recordings(fit_paths, hold_paths, out_dir, progress=None)
         check_distinct(fit_recs, h)
     check_same_rig([*fit_recs, *hold_recs])
 
-    say(f"identifying the baseline per joint on {len(fit_recs)} fit recording(s) (reported; the per-joint cut "
-        f"does not use it)")
+    say(f"identifying the baseline per joint on {len(fit_recs)} fit recording(s) (reported; the per-joint cuts "
+        f"do not use it)")
     result, _, ex = identify_recs(fit_recs)
     for w in result.warnings:
         say(f"warning (baseline): {w}")
@@ -97,46 +104,54 @@ def diagnose_excavator_recordings(fit_paths, hold_paths, out_dir, progress=None)
                 "warnings": [*result.warnings, *notes],
                 "used_by_verdict": False}
 
-    where, effects, figures, verdicts = [], [], [], {}
-    for h in hold_recs:
-        say(f"localising and attributing per joint on {h.path} (this is the long part)")
-        hx = machine_for(h, ex)
-        found = diagnose_excavator(h.data, hx)
-        verdicts[str(h.path)] = found.verdict
+    hx = machine_for(hold_recs[0], ex)
+    say(f"cutting each joint off the linkage, fitting the candidates on the {len(fit_recs)} fit recording(s) and "
+        f"scoring them on the {len(hold_recs)} holdout(s) (this is the long part)")
+    found = diagnose_excavator(fit_recs, hold_recs, hx, progress=say)
+    where, effects, figures = [], [], []
+    named = {j: _named(f) for j, f in found.joints.items()}
+    for k, h in enumerate(hold_recs):
         travel = np.ptp(measured_pistons(h, hx), axis=0)
         curves = {}
         for i, j in enumerate(JOINTS):
             f = found.joints[j]
-            cut = joint_cut(h.data, j, hx)
+            cut = joint_cut(h, j, hx)
             pa, pb = joint_pressures(cut, j, hx)
-            best = f.candidates[0] if f.verdict and f.verdict != "unexplained" else None
-            after = joint_pressures(cut, j, hx, {best[0]: _settings(best[0], best[1])}) if best else None
+            best = named[j]
+            after = joint_pressures(cut, j, hx, best.params) if best else None
             curves[j] = (cut, pa, pb, after, best)
             # as the cut's gap compares them (each pressure as its sensor reads it)
             ea, eb = ((as_sensed(m, s) - m) / _span(m) for m, s in ((cut.p_a_raw, pa), (cut.p_b_raw, pb)))
             gaps = {f"p_a_{j}": float(np.sqrt(np.mean(ea ** 2))), f"p_b_{j}": float(np.sqrt(np.mean(eb ** 2)))}
             u = h.data[f"u_{j}"].to_numpy(float)
             opened = bool(np.any(np.abs(u - reference_rig.u_centre) > 0.5))
-            where.append({"joint": j, "recording": str(h.path), "channel": max(gaps, key=gaps.get),
-                          "channel_gaps": gaps, "regime": "whole_recording",
-                          "subsystem": f"valve_{j}, cylinder_{j}", "gap": f.gap, "noise_floor": f.noise,
-                          "threshold": NOISE_FACTOR * f.noise + ABS_FLOOR, "flagged": f.flagged,
-                          "exercised": bool(travel[i] >= MIN_TRAVEL or opened), "travel_mm": float(1e3 * travel[i]),
-                          "finding": f.verdict,
-                          "windows": _windows(cut.t, ea ** 2 + eb ** 2, np.ones(len(cut.t), bool))})
-            for name, params, gap_after, shrink in f.candidates:
-                effects.append({"name": name, "joint": j, "recording": str(h.path), "params": params,
-                                "gap_before": f.gap, "gap_after": gap_after, "shrink": shrink})
+            pc = f.pressures
+            entry = {"joint": j, "recording": str(h.path), "channel": max(gaps, key=gaps.get),
+                     "channel_gaps": gaps, "regime": "whole_recording",
+                     "subsystem": f"valve_{j}, cylinder_{j}", "gap": pc.gaps[k], "noise_floor": pc.noises[k],
+                     "threshold": pc.thresholds[k], "flagged": pc.gaps[k] > pc.thresholds[k],
+                     "exercised": bool(travel[i] >= MIN_TRAVEL or opened), "travel_mm": float(1e3 * travel[i]),
+                     "finding": ", ".join(f.verdict) or None,
+                     "windows": _windows(cut.t, ea ** 2 + eb ** 2, np.ones(len(cut.t), bool))}
+            lc = f.position
+            if lc is not None:
+                entry["position"] = {"gap": lc.gaps[k], "noise_floor": lc.noises[k], "threshold": lc.thresholds[k],
+                                     "flagged": lc.gaps[k] > lc.thresholds[k], "subsystem": f"linkage ({j})",
+                                     "finding": ", ".join(lc.verdict) or None,
+                                     "gap_own_load": lc.own_gaps[k] if lc.own_gaps else None}
+            where.append(entry)
         figures.append((str(h.path), _figure(h, curves)))
-    where.sort(key=lambda w: -(w["gap"] - w["threshold"]))
-    verdict = _combined(verdicts, where)
-    warnings = []
-    if len({tuple(sorted(v)) for v in verdicts.values()}) > 1:
-        warnings.append("the holdouts disagree: " + "; ".join(f"{p}: {v}" for p, v in verdicts.items())
-                        + "; the verdict lists every finding of any of them")
+    for j, f in found.joints.items():
+        for cut in f.cuts:
+            for c in cut.candidates:
+                named = any(cut is n for n in f.named_cuts) and c is cut.candidates[0]
+                effects.append(_effect_entry(j, cut, c, named))
+    where.sort(key=lambda w: -(w["gap"] - w["threshold"]) / w["threshold"])
+    verdict = found.verdict
     doc = {"kind": "excavator",
            "judgeable": True,
-           "method": "per-joint pneumatic cut (boomfmi.diagnose.excavator)",
+           "method": "per-joint cuts, fitted on the fit recordings and scored on the holdouts "
+                     "(boomfmi.diagnose.excavator)",
            "note": NOTE,
            "fit_recordings": [str(r.path) for r in fit_recs],
            "holdout_recordings": [str(h.path) for h in hold_recs],
@@ -145,8 +160,10 @@ def diagnose_excavator_recordings(fit_paths, hold_paths, out_dir, progress=None)
            "where": where,
            "effects": effects,
            "verdict": verdict,
-           "verdict_by_recording": verdicts,
-           "warnings": warnings}
+           "warnings": list(found.notes)}
+    confirmation = _confirm(found, bound, hold_recs, say)
+    if confirmation is not None:
+        doc["confirmation"] = confirmation
     doc = plain(doc)
     with OutputSet(Path(out_dir), stale=OUTPUTS) as files:
         files.path("report.html").write_text(_html(doc, figures))
@@ -154,22 +171,53 @@ def diagnose_excavator_recordings(fit_paths, hold_paths, out_dir, progress=None)
     return doc
 
 
-def _settings(name: str, fitted: dict) -> dict:
-    """A candidate's full settings as ``diagnose.excavator`` fitted it: the fitted
-    parameter, the others at the catalogue's start."""
-    from ..model import EFFECTS
-    return {**{p.name: p.start for p in EFFECTS[name].parameters if not p.switch}, **fitted}
+def _named(f):
+    """The pneumatic cut's named candidate of a joint (single or pair), or None."""
+    c = f.pressures
+    if c.verdict and c.verdict != ["unexplained"] and c.candidates:
+        return c.candidates[0]
+    return None
 
 
-def _combined(verdicts: dict, where: list) -> list:
-    """Every holdout's findings once, the joint with the largest gap first."""
-    gap = {}
-    for w in where:
-        gap[w["joint"]] = max(gap.get(w["joint"], 0.0), w["gap"])
-    seen = []
-    for v in verdicts.values():
-        seen.extend(x for x in v if x not in seen)
-    return sorted(seen, key=lambda x: -gap.get(x.rpartition("@")[2], 0.0))
+def _effect_entry(joint: str, cut, c, named: bool) -> dict:
+    """One fitted candidate as ``diagnosis.json`` lists it."""
+    entry = {"name": c.name, "joint": joint, "cut": cut.kind,
+             "params": c.params.get(c.name, {}) if "+" not in c.name else c.params,
+             "law": {n: sorted(q) for n, q in c.params.items()},
+             "fit_gap": c.fit_gap, "fit_gap_before": cut.fit_gap,
+             "gap_before": cut.gap, "gap_after": float(np.mean(c.hold_gaps)) if c.hold_gaps else None,
+             "holdout_gaps_before": list(cut.gaps), "holdout_gaps_after": list(c.hold_gaps),
+             "shrink": c.shrink if c.not_fitted is None else None, "named": named}
+    if c.values is not None:
+        entry["values"] = c.values
+    if c.not_fitted is not None:
+        entry["not_fitted"] = c.not_fitted
+    return entry
+
+
+def _confirm(found, values: dict, hold_recs, say):
+    """The named effects through ``excavator.ssp`` (``confirm.confirm_machine``) on the
+    first holdout: the baseline's ``values`` (the SSV's), and with each joint's named
+    effects, a friction effect's joint with the load it was re-identified with.  None
+    where no effect is named; where the SSP cannot run them, the reason."""
+    from ..physics import ParameterError
+    from .confirm import confirm_machine
+    effects_by_joint, effect_values = {}, dict(values)
+    for j, f in found.joints.items():
+        for cut in f.named_cuts:
+            if cut.candidates:
+                best = cut.candidates[0]
+                effects_by_joint.setdefault(j, {}).update(best.params)
+                if best.values:
+                    effect_values.update({f"{k}_{j}": float(v) for k, v in best.values.items()
+                                          if k in ("K_v", "F_s", "F_d")})
+    if not effects_by_joint:
+        return None
+    say(f"confirming the named effects through excavator.ssp on {hold_recs[0].path}")
+    try:
+        return confirm_machine(values, effects_by_joint, hold_recs[0], effect_values=effect_values)
+    except (ParameterError, ValueError, RuntimeError, OSError) as e:
+        return {"effects": effects_by_joint, "skipped": f"the SSP could not run the named effects: {e}"}
 
 
 def _figure(h, curves) -> str:
@@ -187,7 +235,7 @@ def _figure(h, curves) -> str:
             ax.plot(cut.t, (m - P_atm) / 1e5, lw=0.8, color="k", label="holdout recording")
             ax.plot(cut.t, (s - P_atm) / 1e5, lw=1.0, label="cut, no effect")
             if after is not None:
-                ax.plot(cut.t, (after[k] - P_atm) / 1e5, lw=1.0, label=f"with {best[0]}")
+                ax.plot(cut.t, (after[k] - P_atm) / 1e5, lw=1.0, label=f"with {best.name}")
             ax.set_ylabel(f"{j}\n{q} [bar gauge]" if k == 0 else f"{q} [bar gauge]")
             if i == 0 or after is not None:
                 ax.legend(loc="best", fontsize=7)
@@ -219,10 +267,12 @@ def _html(doc: dict, figures) -> str:
         f"<td>{e(w['channel'])}</td><td>{'yes' if w['exercised'] else 'no'} ({w['travel_mm']:.1f} mm)</td>"
         f"<td>{e(str(w['windows']))}</td></tr>" for w in doc["where"])
     effects = "".join(
-        f"<tr><td>{e(c['joint'])}</td><td>{e(Path(c['recording']).name)}</td><td>{e(c['name'])}</td>"
-        f"<td>{e(json.dumps(c['params']))}</td><td>{_pct(c['gap_before'])}</td><td>{_pct(c['gap_after'])}</td>"
-        f"<td>{c['shrink']:.3f}</td></tr>" for c in doc["effects"]) or \
-        '<tr><td colspan="7">none: no joint was flagged</td></tr>'
+        f"<tr><td>{e(c['joint'])}</td><td>{e(c['cut'])}</td><td>{e(c['name'])}{' (named)' if c['named'] else ''}</td>"
+        + (f"<td colspan=\"5\">not fitted: {e(c['not_fitted'])}</td></tr>" if c.get("not_fitted") else
+           f"<td>{e(json.dumps(c['params']))}</td><td>{_pct(c['fit_gap_before'])} &rarr; {_pct(c['fit_gap'])}</td>"
+           f"<td>{_pct(c['gap_before'])}</td><td>{_pct(c['gap_after'])}</td><td>{c['shrink']:.3f}</td></tr>")
+        for c in doc["effects"]) or \
+        '<tr><td colspan="8">none: no joint was flagged</td></tr>'
     b = doc["baseline"]
     rows = []
     for k, v in b["params"].items():
@@ -244,22 +294,38 @@ td,th{{border:1px solid #ccc;padding:4px 8px;font-size:13px}}</style></head><bod
 <p>Fit recordings: {e(', '.join(doc['fit_recordings']))}. Holdout recordings: {e(', '.join(doc['holdout_recordings']))}.</p>
 <h2>Where: each joint's gap</h2>
 <p>Each joint's valve and chambers run on its recorded command and its measured motion (the linkage cut off), so a
-pressure gap that remains is that joint's own. The gap is the NRMSE of its two pressures, summed; a joint is flagged
-beyond {doc['noise_factor']:g} times its noise floor plus {100 * doc['abs_floor']:g} %. On a flagged joint each candidate
-of the cut is fitted and the best is named if it removes at least {100 * doc['min_shrink']:.0f} % of the gap, else
-"unexplained" (an effect outside the cut, such as friction, which acts through the linkage).</p>
+pressure gap that remains is that joint's own (and, where the load cut is installed, its load on the measured pressures
+and the other joints' measured motion: a position gap). The gap is the NRMSE of its two pressures, summed; a joint is
+flagged beyond {doc['noise_factor']:g} times its noise floor plus {100 * doc['abs_floor']:g} %. On a flagged joint each
+candidate of the cut is fitted on the fit recordings and scored on the holdouts; the best is named if it removes at
+least {100 * doc['min_shrink']:.0f} % of the holdouts' gap (or a pair, each paying for itself), else "unexplained".</p>
 <table><tr><th>joint</th><th>holdout</th><th>gap</th><th>noise floor</th><th>threshold</th><th>flagged</th>
 <th>finding</th><th>larger error</th><th>exercised (travel)</th><th>largest residual [s]</th></tr>{where}</table>
 <h2>Candidate effects on the flagged joints</h2>
-<table><tr><th>joint</th><th>holdout</th><th>effect</th><th>fitted parameters</th><th>gap before</th>
-<th>gap after</th><th>shrink</th></tr>{effects}</table>
+<p>Fitted on the fit recordings' cuts (their gap before &rarr; after), scored on the holdouts' (never fitted on).</p>
+<table><tr><th>joint</th><th>cut</th><th>effect</th><th>fitted parameters</th><th>fit gap</th><th>holdout gap before</th>
+<th>holdout gap after</th><th>holdout shrink</th></tr>{effects}</table>
 <h2>Baseline</h2><p>{e(doc['note'])}</p>
 <table><tr><th>parameter</th><th>value</th><th>95 % interval</th><th>cannot tell</th></tr>{''.join(rows)}</table>
 <p>The identified machine (monolithic reference, from each holdout's first state) against the holdouts, NRMSE:</p>
 <table><tr><th>joint</th><th>x</th><th>p_a</th><th>p_b</th></tr>{nrmse}</table>
+{_confirmation_html(doc.get("confirmation"))}
 {warnings}
 <h2>Pressures, recorded and from each joint's cut</h2>{imgs}
 </body></html>"""
+
+
+def _confirmation_html(c) -> str:
+    """The confirmation through ``excavator.ssp`` as a section (empty without one)."""
+    if not c:
+        return ""
+    e = html.escape
+    if "skipped" in c:
+        return f"<h2>Confirmation through the FMUs</h2><p>Skipped: {e(c['skipped'])}</p>"
+    rows = "".join(f"<tr><td>{e(j)}</td><td>{v:.3f}</td></tr>" for j, v in c.get("shrink_by_joint", {}).items())
+    return (f"<h2>Confirmation through the FMUs</h2><p>{e(Path(c['ssp']).name)} on {e(Path(c['recording']).name)} "
+            f"with the named effects: holdout shrink {c['shrink']:.3f} over the joints with effects.</p>"
+            f"<table><tr><th>joint</th><th>shrink</th></tr>{rows}</table>")
 
 
 def summary_lines(doc: dict) -> list[str]:
@@ -268,24 +334,37 @@ def summary_lines(doc: dict) -> list[str]:
     lines = []
     b = doc["baseline"]
     lines.extend(f"warning (baseline): {w}" for w in b["warnings"])
-    lines.append("baseline (identified on the fit recordings; the per-joint cut does not use it): holdout NRMSE "
+    lines.append("baseline (identified on the fit recordings; the per-joint cuts do not use it): holdout NRMSE "
                  "x / p_a / p_b: " + "; ".join(f"{j} {100 * r['x']:.2f} / {100 * r['p_a']:.2f} / {100 * r['p_b']:.2f} %"
                                               for j, r in b["nrmse_holdout"].items()))
-    effects = {(c["recording"], c["joint"]): c for c in reversed(doc["effects"])}   # the best of each joint
+    effects = {}
+    for c in doc["effects"]:           # the named (else the best) candidate of each joint
+        if c.get("not_fitted") is None and (c["named"] or c["joint"] not in effects):
+            if c["named"] or c["cut"] == "pressures":
+                effects[c["joint"]] = c
     for rec in doc["holdout_recordings"]:
         lines.append(f"holdout {rec}: each joint's gap (NRMSE of p_a + p_b) against its threshold:")
         for j in JOINTS:
             w = next(w for w in doc["where"] if w["joint"] == j and w["recording"] == rec)
             text = (f"  {j:7s}gap {_pct(w['gap']):>8s} (noise floor {_pct(w['noise_floor'])}, threshold "
                     f"{_pct(w['threshold'])})")
-            if w["flagged"]:
-                c = effects.get((rec, j))
+            pos = w.get("position")
+            if pos:
+                text += f"; position {_pct(pos['gap'])} (threshold {_pct(pos['threshold'])})"
+            if w["flagged"] or (pos and pos["flagged"]):
+                c = effects.get(j)
                 text += f"  FLAGGED: {w['finding']}"
                 if c:
-                    text += (f" (best candidate {c['name']}: shrink {c['shrink']:.2f}, "
-                             + ", ".join(f"{k} = {v:.3g}" for k, v in c["params"].items()) + ")")
+                    flat = {k: v for k, v in c["params"].items() if not isinstance(v, dict)} or \
+                        {f"{n}.{k}": v for n, q in c["params"].items() for k, v in q.items()}
+                    text += (f" (best candidate {c['name']}: holdout shrink {c['shrink']:.2f}, "
+                             + ", ".join(f"{k} = {v:.3g}" for k, v in flat.items()) + ")")
             lines.append(text)
     lines.extend(f"warning: {w}" for w in doc["warnings"])
+    c = doc.get("confirmation")
+    if c:
+        lines.append(f"confirmation through {c.get('ssp', 'excavator.ssp')}: "
+                     + (f"skipped: {c['skipped']}" if "skipped" in c else f"holdout shrink {c['shrink']:.2f}"))
     lines.append(f"verdict: {doc['verdict']}")
     return lines
 

@@ -59,15 +59,25 @@ def regimes(p: Prepared, L: float) -> np.ndarray:
 
 def simulate_pneumatics(p: Prepared, boom: Boom):
     """Valve and cylinder alone, driven by the recorded command and motion (measured
-    signals in place of the boom's): the chamber pressures [Pa, absolute]."""
+    signals in place of the boom's): the chamber pressures [Pa, absolute].  With
+    valve_dynamics on, the spool (starting at the first command) lags the command
+    (``Boom.spool_step`` before ``Boom.opening``, as the FMUs and the reference do),
+    the orifices seeing its position at each step's middle."""
     n = len(p.t)
     pa, pb = np.empty(n), np.empty(n)
     pa[0], pb[0] = float(p.p_a_raw[0]), float(p.p_b_raw[0])
     x = np.clip(p.x, 0.0, boom.cylinder.L)
     masses = list(boom.air_masses(pa[0], pb[0], float(x[0])))
+    spool = boom.tau_spool > 0.0
+    y = float(p.u[0])
     for k in range(n - 1):
         x0 = float(x[k])
-        m_a, m_b, s_a, s_b = boom.chamber_inflows(boom.opening(float(p.u[k])), pa[k], pb[k], x0)
+        if spool:
+            y1 = boom.spool_step(y, float(p.u[k]), p.t[k + 1] - p.t[k])
+            cmd, y = 0.5 * (y + y1), y1
+        else:
+            cmd = float(p.u[k])
+        m_a, m_b, s_a, s_b = boom.chamber_inflows(boom.opening(cmd), pa[k], pb[k], x0)
         pa[k + 1], pb[k + 1] = boom.step_chambers(pa[k], pb[k], x0, float(x[k + 1]), m_a, m_b, s_a, s_b,
                                                   p.t[k + 1] - p.t[k], masses)
     return pa, pb

@@ -22,6 +22,7 @@ from .._json import dumps, plain
 from ..compare import CHANNELS, model_for, nrmse, recorded, rig_model, shrink, simulate_recording
 from ..identify import identify_recordings
 from ..identify.preprocess import prepare
+from ..machine import assumption
 from ..outputs import OutputSet
 from ..recording import check_distinct, check_no_duplicates, check_same_rig, read_checked
 from .attribute import ABS_FLOOR, CANDIDATES, NOISE_FACTOR, attribute, may_start_processes
@@ -32,7 +33,7 @@ MIN_TRAVEL = 1e-3     #: [m] a recording whose piston moves less than this canno
 
 
 def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=None, progress=None,
-             baseline=None) -> dict:
+             baseline=None, machine=None) -> dict:
     """Run the diagnosis and write its outputs into ``out_dir`` (as one set: all of them
     or, on an error or interrupt, none; a PNG this run does not draw is removed); return
     the JSON document.  ``workers``: processes for the candidates' fits (default: one
@@ -42,13 +43,17 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
     it too (a campaign's case writes it as params.json): ``identify_recordings(fit_paths,
     "fit")``'s ``(FitResult, recordings)``, or a callable returning them, called only
     where the recordings can be judged (a memoised one then gives the caller the same);
-    default: identified here."""
+    default: identified here.  ``machine``: a ``machine.MachineFile`` the recordings are of
+    (default: their sidecars, else the reference rig, which is then said)."""
     say = progress or (lambda text: None)
     if not hold_paths:
         raise ValueError("diagnose needs at least one holdout recording (--holdout): shrink is measured there")
     out = Path(out_dir)
-    fit_recs = read_checked(fit_paths, role="fit recording")
-    hold_recs = read_checked(hold_paths, role="holdout")
+    fit_recs = read_checked(fit_paths, role="fit recording", machine=machine)
+    hold_recs = read_checked(hold_paths, role="holdout", machine=machine)
+    assumed = assumption(fit_recs + hold_recs, machine)
+    if assumed:
+        say(f"warning: {assumed}")
     check_same_rig(fit_recs + hold_recs)
     check_no_duplicates(fit_recs)
     check_no_duplicates(hold_recs, "holdout")
@@ -65,7 +70,7 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
 
     say(f"identifying the baseline on {len(fit_recs)} fit recording(s)")
     if baseline is None:
-        result, _, _ = identify_recordings(fit_paths, "fit")
+        result, _, _ = identify_recordings(fit_paths, "fit", machine=machine)
     else:
         result, _ = baseline() if callable(baseline) else baseline
     for w in result.warnings:

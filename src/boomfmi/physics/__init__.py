@@ -19,7 +19,7 @@ from .geometry import (alpha_from_x, check_geometry, cylinder_length, linkage_po
                        phi_from_x, x_from_alpha)
 from .lag import first_order_step
 from .load import (acceleration, advance_load, drive_force, friction_force, piston_force,
-                   slide_or_stick, sliding_acceleration, sliding_velocity)
+                   slide_or_stick, sliding_acceleration, sliding_velocity, end_stops)
 from .orifice import (critical_pressure_ratio, mass_flow, mass_flow_slope, signed_mass_flow,
                       signed_mass_flow_slope)
 from .params import (Cylinder, Gas, Geometry, Load, Valve, check_cylinder, check_gas,
@@ -33,7 +33,7 @@ __all__ = [
     "motion_filter_step", "observed_external_force", "measured_drive_force", "below_sensor_floor", "alpha_from_x",
     "check_geometry", "cylinder_length", "phi_from_x", "x_from_alpha", "linkage_points",
     "acceleration",
-    "advance_load", "drive_force", "friction_force", "piston_force", "slide_or_stick", "sliding_velocity",
+    "advance_load", "end_stops", "drive_force", "friction_force", "piston_force", "slide_or_stick", "sliding_velocity",
     "critical_pressure_ratio", "mass_flow", "signed_mass_flow", "Cylinder", "Gas",
     "Geometry", "Load", "Valve", "check_cylinder", "check_gas", "check_load",
     "check_valve", "ParameterError", "chamber_flows", "orifice_area", "chamber_flow_slopes",

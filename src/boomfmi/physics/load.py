@@ -178,13 +178,15 @@ def advance_load(x: float, v: float, dt: float, p_a: float, p_b: float, f_ext: f
         ld = load if load_at is None else load_at(load, v)
         F = F_p - ld.F_L * math.sin(phi)
         dx, v = slide_or_stick(v, F, math.cos(phi), h, ld)
-        x += dx
-        if x <= 0.0:
-            x = 0.0
-            if v < 0.0:
-                v = 0.0
-        elif x >= L:
-            x = L
-            if v > 0.0:
-                v = 0.0
+        x, v = end_stops(x + dx, v, L)
+    return x, v
+
+
+def end_stops(x: float, v: float, L: float):
+    """The hard end stops (Eq. 8's stroke, no bounce): ``(x, v)`` with the position [m]
+    held within [0, L] and a velocity [m/s] into a stop it has reached set to 0."""
+    if x <= 0.0:
+        return 0.0, (0.0 if v < 0.0 else v)
+    if x >= L:
+        return L, (0.0 if v > 0.0 else v)
     return x, v
