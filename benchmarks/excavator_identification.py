@@ -16,6 +16,14 @@ possible (``excavator_tip_force_bounds.py``'s sets with exact sensors, every
 
     .venv/bin/python benchmarks/excavator_identification.py [--seeds 0 1 2] [--sensors standard,noisy,fine]
         [--tip-only] [--every 5]
+    .venv/bin/python benchmarks/excavator_identification.py --noise-seeds 0 1 2 3 4 5 6 7 8 9
+
+``--noise-seeds``: the same recordings' commands under each of the rig's noise draws
+(``seed`` of the rig's config, separate from the excitation's seed) and each sensor
+variant; per parameter the largest error, the mean signed error (F_s's target: within
++-1 %, no systematic sign), the unflagged misses (beyond 5 % and not flagged "cannot
+tell" by ``identify.excavator_outputs.cannot_tell``) and the 95 % intervals' coverage
+(target 90 %).
 """
 import argparse
 import time
@@ -36,6 +44,24 @@ SENSORS = {
 }
 
 
+def noise_summary(rows, truth, flagged_ok=True):
+    """Per parameter over ``rows`` (``(params, cannot_tell)`` of each run): the largest
+    error, the mean signed error, the unflagged misses (beyond 5 % and not flagged
+    "cannot tell") and the share of 95 % intervals that hold the truth; every target met."""
+    ok = True
+    for k in truth:
+        errs = np.array([100.0 * (p[k].value - truth[k]) / truth[k] for p, _ in rows])
+        cover = np.mean([p[k].ci95[0] <= truth[k] <= p[k].ci95[1] for p, _ in rows])
+        misses = sum(abs(e) > 5.0 and why[k] is None for e, (_, why) in zip(errs, rows))
+        flagged = sum(why[k] is not None for _, why in rows)
+        mean_ok = not k.startswith("F_s") or abs(errs.mean()) <= 1.0
+        ok &= misses == 0 and cover >= 0.9 and mean_ok
+        print(f"  {k:12s} worst {np.max(np.abs(errs)):6.2f} %  mean {errs.mean():+6.2f} %"
+              f"{'' if mean_ok else ' (F_s: OVER +-1 %)':18s} unflagged misses {misses:2d}  "
+              f"coverage {100 * cover:5.1f} %{'' if cover >= 0.9 else ' (UNDER 90 %)':13s} cannot tell {flagged}/{len(rows)}")
+    return ok
+
+
 def _worst_lines(worst, covered, runs):
     for k in worst:
         print(f"  {k:12s} {worst[k]:6.2f} %  {'within 5 %' if worst[k] < 5 else 'OVER 5 %':10s} "
@@ -45,14 +71,51 @@ def _worst_lines(worst, covered, runs):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="excitation seeds")
+    ap.add_argument("--noise-seeds", type=int, nargs="+", default=None,
+                    help="the rig's noise seeds (its sensor noise draw), each with the same commands: "
+                         "with it, the noise part runs (excitation seed: the first of --seeds) and the "
+                         "excitation part is skipped; e.g. --noise-seeds 0 1 2 3 4 5 6 7 8 9")
     ap.add_argument("--sensors", default=",".join(SENSORS), help=f"sensor variants, of {', '.join(SENSORS)}")
     ap.add_argument("--tip-only", action="store_true", help="the tip force's figures only")
     ap.add_argument("--every", type=int, default=5, help="every n-th contact sample for the best possible width")
     ap.add_argument("--scenarios", default=",".join(E.TIP_FORCE_SCENARIOS), help="tip force scenarios")
     args = ap.parse_args(argv)
+    if args.noise_seeds is not None:
+        return 0 if noise_draws(args) else 1
     if not args.tip_only:
         identification(args)
     tip_force(args)
+
+
+def noise_draws(args):
+    """The same commands (the digging cycle and ``excavator_excitation`` of the first
+    excitation seed) under each sensor variant and each of the rig's noise seeds: per
+    parameter and variant, and over all, the summary of :func:`noise_summary`."""
+    from boomfmi.identify.excavator_outputs import cannot_tell
+    truth = true_values(payload=PAYLOAD)
+    cmds = (E.digging_cycle(), E.excavator_excitation(seed=args.seeds[0]))
+    every, ok = [], True
+    for variant in args.sensors.split(","):
+        rows = []
+        for ns in args.noise_seeds:
+            t0 = time.perf_counter()
+            cfg = {"machine": "excavator", "payload": PAYLOAD, "noise": SENSORS[variant], "seed": ns}
+            recs = [run_excavator_offline(cfg, c, c.duration) for c in cmds]
+            result = identify_excavator(recs)
+            why = cannot_tell(result)
+            rows.append((result.params, why))
+            errs = "  ".join(f"{k} {100 * (e.value / truth[k] - 1):+.1f}%"
+                             + ("" if e.ci95[0] <= truth[k] <= e.ci95[1] else "!") + ("?" if why[k] else "")
+                             for k, e in result.params.items())
+            print(f"{variant} sensors, noise seed {ns} ({time.perf_counter() - t0:.0f} s): {errs}", flush=True)
+        print(f"{variant} sensors over {len(rows)} noise seeds (! interval misses the truth, ? cannot tell):")
+        ok &= noise_summary(rows, truth)
+        every += rows
+    print(f"every variant, {len(every)} runs:")
+    ok &= noise_summary(every, truth)
+    print("targets (each parameter within 5 % or flagged, every F_s's mean error within +-1 %, "
+          f"coverage >= 90 %): {'met' if ok else 'NOT met'}")
+    return ok
 
 
 def identification(args):
@@ -116,4 +179,4 @@ def tip_force(args):
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -18,6 +18,7 @@ from ..system.ssv import write_ssv
 from .fit import DEADBAND_WIDEST, SPOOL_LAG, FitResult, fill_rates, identify
 from .paper import identify_paper
 from .preprocess import CUTOFF, beyond_noise, prepare
+from ..machine import assumption
 
 #: Where each identified parameter lives in the SSP system.
 SSP_NAMES = {"K_v": "boom_load.K_v", "F_s": "boom_load.F_s", "F_d": "boom_load.F_d",
@@ -25,12 +26,14 @@ SSP_NAMES = {"K_v": "boom_load.K_v", "F_s": "boom_load.F_s", "F_d": "boom_load.F
 
 
 def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
-                        cutoff: float = CUTOFF, eq13: str = "printed"):
+                        cutoff: float = CUTOFF, eq13: str = "printed", machine=None):
     """Read, validate and prepare the recordings, then identify; returns
-    ``(FitResult, recordings, prepared)``."""
+    ``(FitResult, recordings, prepared)``.  ``machine``: a ``machine.MachineFile`` the
+    recordings are of (default: each one's sidecar, else the reference rig, which the
+    result's warnings then say)."""
     if method not in ("fit", "paper"):
         raise ValueError(f"unknown method {method!r}: 'paper' or 'fit'")
-    recs = read_checked(paths)
+    recs = read_checked(paths, machine=machine)
     check_same_rig(recs)
     check_no_duplicates(recs)
     rig = rig_model(recs[0])
@@ -42,6 +45,9 @@ def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
         result = identify_paper(preps, rig.cylinder, P_atm=rig.P_atm, eq13=eq13)
     result.details["recordings"] = [str(p) for p in paths]
     result.details["cutoff_Hz"] = cutoff
+    assumed = assumption(recs, machine)
+    if assumed:
+        result.warnings.append(assumed)
     _check_physical(result, paths)
     if method == "fit":
         _check_time_scale(preps, rig, paths, result)

@@ -20,7 +20,7 @@ Three stages, as the boom's (``identify.fit``):
    the equation, multiplied by the sliding indicator s (a resting row is 0 = 0, as
    the boom's), is linear in theta = (K_v, F_d per cylinder, m)::
 
-       K_v G[x'] + F_d G[s scale dir] + m G[s dD] = G[s (F_p - D0 + lam J^T f)]
+       K_v G[s x'] + F_d G[s scale dir] + m G[s dD] = G[s (F_p - D0 + lam J^T f)]
 
    with D0 = M_x(0) x'' + bias(0) and dD = the payload's share per kg, evaluated from
    the position low-passed at the preparation's cut-off and every term then passed
@@ -36,7 +36,10 @@ Three stages, as the boom's (``identify.fit``):
 2. **Static friction from every start** per joint: each joint becomes an equivalent
    single cylinder (unit areas, the net force on it of everything but its own
    friction and inertia, its diagonal mass ``M_x[i, i]``) and the boom's stage 3
-   (``fit.static_friction``) reads its starts.
+   (``fit.static_friction``) reads its starts.  Its interval is widened to every level
+   within a 95 % likelihood ratio of the starts' combined evidence (:func:`_honest_static`:
+   a start bounds F_s sharply from above and only softly from below), and F_s counts as
+   told only where that interval is within :data:`PROMISE` of it.
 """
 from __future__ import annotations
 
@@ -62,6 +65,10 @@ TRANSITION_REACH = 0.5
 JOINT_PARAMS = ("K_v", "F_s", "F_d")
 UNITS = {"K_v": "N.s/m", "F_s": "N", "F_d": "N", "payload": "kg"}
 SYSTEMATIC_PAYLOAD = 0.02
+#: The accuracy a value reported as identified promises (a relative half-width of its
+#: 95 % interval): F_s is reported as what the data cannot tell where its interval is
+#: wider (``benchmarks/excavator_identification.py``'s target: within 5 % or flagged).
+PROMISE = 0.05
 
 
 @dataclass
@@ -157,11 +164,14 @@ def equation_rows(joints: list[JointData], cutoff: float = EE_CUTOFF):
         p, modes = jd.p, jd.modes
         G = lambda y: lowpass(y, p.fs, cutoff)
         s = modes.sliding.astype(float)
-        xg = G(p.x_raw)
-        vg = np.gradient(xg, p.t)
         n = len(p.t)
         X = np.zeros((n, 9))
-        X[:, i] = vg
+        # the viscous term multiplied by s as every other term: a slow slide below the
+        # speed that counts as motion (which rises with the sensor's quantum and noise) is
+        # classified as rest, and a row with its velocity but without its drive force
+        # pulled K_v_boom 1 to 2 % low and F_d_boom 3 to 5 % high over noise draws, their
+        # intervals missing the truth
+        X[:, i] = G(s * p.v)
         X[:, 4 + i] = G(s * jd.scale * modes.direction)
         X[:, 8] = G(s * jd.dD)
         y = G(s * (jd.F_p - jd.D0))
@@ -243,6 +253,21 @@ def _equivalent(jd: JointData, payload: float) -> Prepared:
                     cutoff=p.cutoff, source=p.source)
 
 
+def _honest_static(F_s: Estimate, info: dict) -> tuple[Estimate, bool]:
+    """F_s's interval widened to every level its starts' combined evidence allows
+    (``fit.static_friction``'s ``likelihood_range_N``: a start bounds F_s sharply from
+    above and only softly from below, so the posterior is flat-topped with the truth
+    near its upper edge, which its 2.5 and 97.5 percentiles cut off: on the excavator's
+    rig, F_s_boom's interval missed the truth on some noise draws).  The data identify
+    F_s where that interval is narrower than :data:`PROMISE` of it on either side and
+    its top is below the grid's (a start not bounded above)."""
+    lo_L, hi_L = info.get("likelihood_range_N", (F_s.ci95[0], F_s.ci95[1]))
+    ratio = _widened("F_s", F_s.value, min(lo_L, F_s.value), max(hi_L, F_s.value))   # its floor once
+    est = Estimate(F_s.value, (min(F_s.ci95[0], ratio.ci95[0]), max(F_s.ci95[1], ratio.ci95[1])), F_s.unit)
+    top = info.get("grid_N", (math.nan, math.inf))[1]
+    return est, bool(hi_L < top and est.relative_halfwidth < PROMISE)
+
+
 def identify_excavator(recordings, ex: exc.Excavator = exc.Excavator(), cutoff: float = CUTOFF) -> FitResult:
     """Each cylinder's K_v, F_s, F_d and the payload [kg] from excavator recordings
     (``Recording`` objects or DataFrames with the excavator's columns), the linkage's
@@ -266,12 +291,15 @@ def identify_excavator(recordings, ex: exc.Excavator = exc.Excavator(), cutoff: 
         base = {"M": M, "K_v": est[f"K_v_{j}"].value, "F_d": est[f"F_d_{j}"].value, "F_L": 0.0,
                 "F_unsure": [r[i].unsure for r in data]}
         F_s, identified, info3 = static_friction(motions, base, cyl, P_atm)
+        if F_s is not None:
+            F_s, identified = _honest_static(F_s, info3)
         details["static_friction"][j] = dict(info3, identified=bool(identified))
         if F_s is None:
             warnings.append(f"{j}: no start of motion from rest: F_s_{j} cannot be identified; F_d is used")
             F_s = Estimate(base["F_d"], (math.nan, math.nan), "N")
         elif not identified:
-            warnings.append(f"{j}: the starts put F_s_{j} anywhere in [{F_s.ci95[0]:.4g}, {F_s.ci95[1]:.4g}] N")
+            warnings.append(f"{j}: the data cannot tell F_s_{j} within {100 * PROMISE:.0f} %: the starts put it "
+                            f"anywhere in [{F_s.ci95[0]:.4g}, {F_s.ci95[1]:.4g}] N")
         est[f"F_s_{j}"] = F_s
     for k, e in est.items():
         if not k.startswith("F_s") and not e.tells and k != "payload":

@@ -46,12 +46,13 @@ import pandas as pd
 
 from .._json import dumps, plain
 from ..compare import as_sensed
+from ..machine import assumption
 from ..outputs import OutputSet
 from ..physics import excavator as exc
-from ..recording import (Recording, check_distinct, check_no_duplicates, check_same_rig, read_checked,
+from ..recording import (EXCAVATOR_RIG_KEYS, Recording, check_distinct, check_no_duplicates, check_same_rig, read_checked,
                          recording_inputs)
 from ..system.ssv import write_ssv
-from .excavator import JOINT_PARAMS, JOINTS, UNITS, identify_excavator
+from .excavator import JOINT_PARAMS, JOINTS, PROMISE, UNITS, identify_excavator
 from .fit import FitResult
 from .preprocess import CUTOFF
 
@@ -80,30 +81,36 @@ def param_joint(param: str) -> str | None:
 
 
 def machine_for(rec: Recording, ex: exc.Excavator | None = None) -> exc.Excavator:
-    """``ex`` (default: ``excavator.md``'s machine) with the recording's P_atm."""
+    """``ex`` (default: ``excavator.md``'s machine) with the recording's sidecar values
+    (a machine file's, ``machine.py``: ``<field>_<joint>`` ..., P_atm)."""
     ex = ex or exc.Excavator()
-    return replace(ex, P_atm=rec.P_atm) if rec.P_atm != ex.P_atm else ex
+    own = {k: float(v) for k, v in rec.rig.items() if k in EXCAVATOR_RIG_KEYS}
+    return exc.excavator_from_values(own, ex) if own else ex
 
 
 def sidecar_warnings(recs) -> list[str]:
     """A warning per recording whose sidecar sets rig values the excavator does not apply."""
     out = []
     for r in recs:
-        ignored = sorted(k for k in r.rig if k != "P_atm")
+        ignored = sorted(k for k in r.rig if k not in EXCAVATOR_RIG_KEYS)
         if ignored:
             out.append(f"{r.path}: the sidecar's rig values {', '.join(ignored)} are the boom's; the excavator's "
                        f"identification and diagnosis use excavator.md's machine (only P_atm applies)")
     return out
 
 
-def identify_excavator_recordings(paths, cutoff: float = CUTOFF, ex: exc.Excavator | None = None):
+def identify_excavator_recordings(paths, cutoff: float = CUTOFF, ex: exc.Excavator | None = None, machine=None):
     """Read and check the recordings, identify per joint; ``(FitResult, recordings,
     Excavator)`` (the machine the identification assumed: ``ex`` with the recordings'
-    P_atm)."""
-    recs = read_checked(paths, "excavator", "fit recording")
+    sidecar values, or ``machine``'s: a ``machine.MachineFile``)."""
+    recs = read_checked(paths, "excavator", "fit recording", machine=machine)
     check_same_rig(recs)
     check_no_duplicates(recs)
-    return identify_recs(recs, cutoff, ex)
+    result, recs, ex = identify_recs(recs, cutoff, ex)
+    assumed = assumption(recs, machine)
+    if assumed:
+        result.warnings.append(assumed)
+    return result, recs, ex
 
 
 def identify_recs(recs, cutoff: float = CUTOFF, ex: exc.Excavator | None = None):
@@ -130,7 +137,8 @@ def cannot_tell(result: FitResult) -> dict[str, str | None]:
             if name.startswith("F_s_") and not statics.get(joint, {}).get("starts", 1):
                 reason = f"no start of motion from rest (F_d_{joint} is used)"
         elif name.startswith("F_s_") and not statics.get(joint, {}).get("identified", True):
-            reason = "the starts put it anywhere in its interval"
+            reason = (f"the starts put it anywhere in its interval, wider than "
+                      f"{100 * PROMISE:.0f} % of it on a side")
         elif name != "payload" and not name.startswith("F_s_") and not e.tells:
             reason = "its interval is wider than half its value"
         else:

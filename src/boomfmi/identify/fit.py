@@ -567,8 +567,15 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
         lo_F, hi_F = min(lo_F, F_s - half), max(hi_F, F_s + half)
     est = _widened("F_s", F_s, min(lo_F, F_s), max(hi_F, F_s))
     identified = hi_F < grid[-2] and est.relative_halfwidth < IDENTIFIED_WIDTH
+    # the levels whose combined evidence is within a 95 % likelihood ratio of the best
+    # (log within 1.92): each start bounds F_s sharply from above (a later start cannot
+    # make the motion seen) and only softly from below (an earlier one creeps within the
+    # sensor's noise), so the posterior is flat-topped with the truth near its upper
+    # edge, which its percentiles cut off; a caller may widen the interval to this range
+    keep = grid[np.log(np.maximum(w, 1e-300)) >= np.log(w.max()) - 1.92]
     return est, identified, {"starts": len(events), "each": each, "lower_bound_N": lower,
-                             "grid_N": [float(grid[0]), float(grid[-1])]}
+                             "grid_N": [float(grid[0]), float(grid[-1])],
+                             "likelihood_range_N": [float(keep[0]), float(keep[-1])]}
 
 
 def _blurred(post: np.ndarray, width: float) -> np.ndarray:
