@@ -26,3 +26,21 @@ def plain(obj):
 def dumps(obj, **kwargs) -> str:
     """``json.dumps`` of :func:`plain` ``(obj)``, refusing anything that is still not JSON."""
     return json.dumps(plain(obj), allow_nan=False, **kwargs)
+
+
+def read_object(path, keys, what: str, error):
+    """The JSON object in the file ``path`` (a ``pathlib.Path``), checked: it exists, is
+    JSON, is an object, and holds only ``keys``.  A fault raises ``error(path, message)``
+    (the caller's error type), the message naming ``what`` the file is."""
+    if not path.is_file():
+        raise error(path, f"no such {what}")
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise error(path, f"the {what} is not valid JSON: {e}") from None
+    if not isinstance(doc, dict):
+        raise error(path, f"the {what} must hold a JSON object")
+    for k in doc:
+        if k not in keys:
+            raise error(path, f"unknown key {k!r}; a {what} may hold {', '.join(keys)}")
+    return doc

@@ -255,7 +255,7 @@ def _record(args) -> int:
     from .record import record_experiment
     _not_inputs([args.out], [args.fmu, args.key_file])
     stats = record_experiment(args.fmu, args.rig, args.out, args.experiment, args.step, args.stop,
-                              args.key_file, args.timeout, args.retries, args.loss_budget)
+                              args.key_file, args.timeout, args.retries, args.loss_budget, _machine(args))
     print(f"wrote {args.out}: {stats['rows']} rows, {stats['lost_packets']} answers lost")
     return 0
 
@@ -271,7 +271,8 @@ def _identify(args) -> int:
         return _identify_excavator(args)
     from .identify import identify_recordings, write_outputs
     from .identify.preprocess import ABS_FLOOR, NOISE_FACTOR
-    result, recs, _ = identify_recordings(args.recordings, args.method, args.a_max, args.cutoff, args.eq13)
+    result, recs, _ = identify_recordings(args.recordings, args.method, args.a_max, args.cutoff, args.eq13,
+                                          machine=_machine(args))
     doc = write_outputs(result, recs, args.out, args.holdout)
     print(f"{result.method}: " + ", ".join(
         f"{k} = {e.value:.4g} {e.unit}" + (f" [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]" if e.ci95[0] == e.ci95[0] else "")
@@ -300,7 +301,7 @@ def _identify_excavator(args) -> int:
     from .identify.excavator_outputs import identify_excavator_recordings, summary_lines, write_excavator_outputs
     say = _progress("identify")
     say(f"identifying the whole excavator per joint on {len(args.recordings)} recording(s)")
-    result, recs, ex = identify_excavator_recordings(args.recordings, args.cutoff)
+    result, recs, ex = identify_excavator_recordings(args.recordings, args.cutoff, machine=_machine(args))
     doc = write_excavator_outputs(result, recs, args.out, args.holdout, ex, progress=say)
     for line in summary_lines(doc):
         print(line)
@@ -316,7 +317,8 @@ def _diagnose(args) -> int:
         return _diagnose_excavator(args)
     from .diagnose import diagnose
     doc = diagnose(args.recordings, args.holdout, args.out, ssp=args.ssp,
-                   progress=lambda text: print(f"diagnose: {text}", file=sys.stderr, flush=True))
+                   progress=lambda text: print(f"diagnose: {text}", file=sys.stderr, flush=True),
+                   machine=_machine(args))
     for w in (doc.get("baseline") or {}).get("warnings", []):
         print(f"warning (baseline): {w}")
     if not doc["judgeable"]:
@@ -416,6 +418,11 @@ def _read_options(args) -> dict:
                         thousands=_separators(args.thousands, "--thousands"), encoding=args.encoding)
 
 
+def _add_machine_option(p, what: str) -> None:
+    p.add_argument("--machine", type=Path, metavar="FILE",
+                   help=f"your machine's file (boomfmi machine init), {what}")
+
+
 def _add_map_options(p) -> None:
     from .foreign import PRESETS
     p.add_argument("--map", help="the columns: NAME=COLUMN:UNIT,... with COLUMN a 1-based number or (with "
@@ -436,10 +443,52 @@ def _add_map_options(p) -> None:
 
 def _recording_import(args) -> int:
     from .foreign import import_recording
-    out = import_recording(args.file, args.out, _read_options(args))
+    machine = _machine(args)
+    out = import_recording(args.file, args.out, _read_options(args), machine=machine)
+    if machine is None:
+        print("recording import: no --machine: the recording gets no sidecar, and identify and diagnose will "
+              "assume the reference rig (describe yours with: boomfmi machine init --out machine.json)",
+              file=sys.stderr)
     from .recording import read_recording
     rec = read_recording(out)
     print(f"wrote {out}: {len(rec.data)} rows, columns {', '.join(rec.data.columns)}")
+    return 0
+
+
+def _machine(args):
+    """The ``--machine FILE`` of a command, read and checked before anything else
+    (:func:`main`); None without one."""
+    if getattr(args, "machine", None) is None:
+        return None
+    if getattr(args, "machine_read", None) is None:
+        from .machine import read_machine
+        args.machine_read = read_machine(args.machine)
+    return args.machine_read
+
+
+def _machine_init(args) -> int:
+    from ._json import dumps
+    from .machine import machine_document
+    from .outputs import OutputSet
+    if args.out.exists():
+        raise FileExistsError(f"{args.out}: exists; edit it, or choose another --out")
+    doc = machine_document(args.kind, args.name or "")
+    with OutputSet(args.out.parent) as files:
+        files.path(args.out.name).write_text(dumps(doc, indent=2) + "\n")
+    print(f"wrote {args.out}: the {'reference rig' if args.kind == 'boom' else 'excavator of excavator.md'}, "
+          f"{len(doc['rig'])} values (SI units, or any unit as text: \"63 mm\"); edit it to your machine and "
+          f"give it to identify, diagnose, record and recording import with --machine {args.out}")
+    return 0
+
+
+def _machine_check(args) -> int:
+    from .machine import read_machine, units_of
+    m = read_machine(args.file)
+    units = units_of(m.kind)
+    print(f"{args.file}: {'an' if m.kind == 'excavator' else 'a'} {m.kind}{f' ({m.name})' if m.name else ''}, "
+          f"{len(m.rig)} values, within the physics' bounds")
+    for k, v in m.rig.items():
+        print(f"  {k} = {v:.6g} {units[k]}")
     return 0
 
 
@@ -481,7 +530,9 @@ def _bench_leak(args) -> int:
     return 0
 
 
-def main(argv=None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The whole command line's parser, built without running anything (tests/test_readme.py parses
+    every command of the README with it)."""
     parser = argparse.ArgumentParser(prog="boomfmi", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("simulate", help="run an experiment on an SSP system, write a recording-format CSV")
@@ -536,6 +587,7 @@ def main(argv=None) -> int:
     p.add_argument("--timeout", type=float, default=0.05, help="longest wait for the rig's answer per step [s]")
     p.add_argument("--retries", type=int, default=2)
     p.add_argument("--loss-budget", type=int, default=20, help="consecutive lost answers before giving up")
+    _add_machine_option(p, "written into the recording's sidecar")
     p.set_defaults(run=_record)
     p = sub.add_parser("identify", help="identify the model's parameters from recordings (the boom's, or the whole "
                                         "excavator's: each cylinder's K_v, F_s, F_d and the payload)")
@@ -549,6 +601,7 @@ def main(argv=None) -> int:
     p.add_argument("--eq13", choices=("printed", "derived"), default="printed",
                    help="paper method: Eq. 13 as printed, or as derived from the force balances")
     p.add_argument("--out", type=Path, required=True, help="params.json (params.ssv and params.png go beside it)")
+    _add_machine_option(p, "the recordings are of (default: their sidecars, else the reference rig)")
     p.set_defaults(run=_identify)
     p = sub.add_parser("diagnose", help="where the model and the machine disagree, and which effect explains it "
                                         "(for the whole excavator's recordings: which joint, and which effect)")
@@ -558,6 +611,7 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--ssp", type=Path, default=None,
                    help="the boom's SSP for confirming the verdict through the FMUs (default: build/excavator_boom.ssp)")
+    _add_machine_option(p, "the recordings are of (default: their sidecars, else the reference rig)")
     p.set_defaults(run=_diagnose)
     p = sub.add_parser("campaign", help="identify and diagnose many machines and dates on Dask; trends and flags")
     p.add_argument("manifest", type=Path, help="CSV: machine, date, role (fit or holdout), recording[, sidecar]")
@@ -619,7 +673,19 @@ def main(argv=None) -> int:
     p.add_argument("file", type=Path)
     _add_map_options(p)
     p.add_argument("--out", type=Path, required=True, help="the recording to write (CSV)")
+    _add_machine_option(p, "written as the recording's sidecar (its P_atm converts gauge and absolute pressures)")
     p.set_defaults(run=_recording_import)
+    p = sub.add_parser("machine", help="describe your machine in one file (for --machine)")
+    m_sub = p.add_subparsers(dest="machine_command", required=True)
+    p = m_sub.add_parser("init", help="write a machine file at the reference's values, for you to edit")
+    p.add_argument("--kind", choices=("boom", "excavator"), default="boom",
+                   help="boom: the paper's one-joint rig (default); excavator: the whole four-joint machine")
+    p.add_argument("--name", help="the machine's name (free text)")
+    p.add_argument("--out", type=Path, required=True, help="the machine file to write (JSON)")
+    p.set_defaults(run=_machine_init)
+    p = m_sub.add_parser("check", help="read and check a machine file; print its values in SI units")
+    p.add_argument("file", type=Path)
+    p.set_defaults(run=_machine_check)
     p = sub.add_parser("bench", help="the test bench: friction and leak-down tests of a cylinder")
     bench_sub = p.add_subparsers(dest="bench_command", required=True)
     p = bench_sub.add_parser("friction", help="fit the friction laws (eq9, stribeck, pressure), score them on "
@@ -656,8 +722,13 @@ def main(argv=None) -> int:
                    help="folder with <name>/<name>_in.csv and _ref.csv (default: the checkout's fmus/, "
                         "whatever the working directory)")
     p.set_defaults(run=_check)
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
     try:
+        _machine(args)                   # a machine file is checked before any work
         return args.run(args)
     except (OSError, ValueError, RuntimeError, KeyError, LinkError) as e:
         print(f"boomfmi {args.command}: {e}", file=sys.stderr)

@@ -35,6 +35,7 @@ columns are missing where they do not.
 from __future__ import annotations
 
 import csv
+import json
 import re
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -44,7 +45,8 @@ import numpy as np
 
 from .outputs import OutputSet, check_not_inputs
 from .physics import reference_rig
-from .recording import OPTIONAL, REQUIRED, RecordingError, read_recording, write_recording
+from .recording import (OPTIONAL, REQUIRED, RecordingError, read_recording, recording_kind, sidecar_path,
+                        write_recording)
 
 #: Delimiter names: ``whitespace`` splits on runs of blanks and tabs.
 DELIMITERS = {"tab": "\t", "comma": ",", "semicolon": ";", "space": " ", "whitespace": None}
@@ -453,20 +455,30 @@ def recording_frame(table: ForeignTable):
     return pd.DataFrame(data)
 
 
-def import_recording(path, out, opts: dict, P_atm: float = reference_rig.P_atm) -> Path:
+def import_recording(path, out, opts: dict, P_atm: float = reference_rig.P_atm, machine=None) -> Path:
     """Convert a foreign file into a recording at ``out``: read it with ``opts``
     (:func:`read_options`), write it in the recording format and read it back through
     :func:`~boomfmi.recording.read_recording`; a fault found there is reported at the
     foreign file's own line.  Nothing is left at ``out`` on an error, and an existing
     ``out`` is as it was.  ``out`` may not be the foreign file (nor a link to it), and
-    is locked while it is written (``outputs.OutputSet``)."""
+    is locked while it is written (``outputs.OutputSet``).  ``machine``: a
+    ``machine.MachineFile`` the file is of: its values are the recording's sidecar (written
+    with it, as one set), and its P_atm converts gauge and absolute pressures."""
     out = Path(out)
-    check_not_inputs([out], [Path(path)])
+    side = sidecar_path(out)
+    check_not_inputs([out, side], [Path(path)])
+    if machine is not None:
+        P_atm = float(machine.rig.get("P_atm", P_atm))
     table = read_with(path, opts, P_atm)
     frame = recording_frame(table)
+    if machine is not None and recording_kind(frame.columns) != machine.kind:
+        raise ValueError(f"{machine.path}: describes {'an' if machine.kind == 'excavator' else 'a'} {machine.kind}; "
+                         f"the map of {path} makes a {recording_kind(frame.columns)}'s recording")
     with OutputSet(out.parent, inputs=[Path(path)]) as files:
         tmp = files.path(out.name)
         write_recording(tmp, frame)
+        if machine is not None:                # the sidecar: written with the recording, as one set
+            files.path(side.name).write_text(json.dumps({"rig": machine.sidecar()}, indent=2) + "\n")
         try:
             read_recording(tmp)
         except RecordingError as e:

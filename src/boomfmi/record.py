@@ -14,6 +14,8 @@ excavator recording's columns (:data:`EXCAVATOR_COLUMNS`).
 from __future__ import annotations
 
 import math
+import signal
+import threading
 from pathlib import Path
 
 from .experiments import EXCAVATOR_PROFILES, JOINTS, excavator_profile, profile
@@ -82,15 +84,50 @@ def _interrupted(e: BaseException) -> bool:
     return isinstance(e, KeyboardInterrupt) or (isinstance(e, FmuError) and "KeyboardInterrupt" in str(e))
 
 
+class _Sigint:
+    """Ctrl-C (SIGINT) noted, not raised, while the run is in the bridge FMU's calls: its
+    Python code runs in this process, and an interrupt raised inside one of its calls
+    (a ``fmi2GetReal``) would end the instance with an error that no longer says why.
+    The loop checks :attr:`hit` between steps.  Outside the main thread (where no
+    handler can be set) it never hits, and Ctrl-C raises as usual."""
+
+    def __enter__(self):
+        self.hit = False
+        self._old = None
+        if threading.current_thread() is threading.main_thread():
+            self._old = signal.signal(signal.SIGINT, self._note)
+        return self
+
+    def _note(self, signum, frame):
+        self.hit = True
+
+    def __exit__(self, *exc):
+        if self._old is not None:
+            signal.signal(signal.SIGINT, self._old)
+        return False
+
+
 def _inputs(fmu, key_file) -> list:
     """The run's input files, which the recording may not be."""
     return [Path(fmu), *([Path(key_file)] if key_file else [])]
 
 
+def _rig_values(machine, kind: str) -> dict:
+    """The sidecar's ``rig`` of a recording of ``machine`` (none without one); a machine
+    of the other kind is refused before anything is opened."""
+    if machine is None:
+        return {}
+    if machine.kind != kind:
+        raise ValueError(f"{machine.path}: describes {'an' if machine.kind == 'excavator' else 'a'} {machine.kind}; "
+                         f"this experiment records {'an' if kind == 'excavator' else 'a'} {kind}")
+    return {"rig": machine.sidecar()}
+
+
 def record_experiment(fmu, rig: str, out, experiment: str = "paper_multistep", step: float = 1e-3,
                       stop_time: float | None = None, key_file: str | None = None,
-                      timeout: float = 0.05, retries: int = 2, loss_budget: int = 20) -> dict:
-    """Run ``experiment`` on the rig at ``rig`` (udp://HOST:PORT); write ``out``.
+                      timeout: float = 0.05, retries: int = 2, loss_budget: int = 20, machine=None) -> dict:
+    """Run ``experiment`` on the rig at ``rig`` (udp://HOST:PORT); write ``out``, and
+    beside it the sidecar with ``machine``'s values (a ``machine.MachineFile``) where given.
 
     ``fmu`` None: ``build/fmus/hardware_bridge.fmu`` of the checkout (or of
     ``$BOOMFMI_BUILD``: :mod:`boomfmi.paths`, from any working directory), or for an
@@ -112,26 +149,28 @@ def record_experiment(fmu, rig: str, out, experiment: str = "paper_multistep", s
     if experiment in EXCAVATOR_PROFILES:
         return record_excavator_experiment(default_file(EXCAVATOR_FMU, "--fmu") if fmu is None else fmu, rig,
                                            out, experiment, step,
-                                           stop_time, key_file, timeout, retries, loss_budget)
+                                           stop_time, key_file, timeout, retries, loss_budget, machine)
     fmu = default_file(FMU, "--fmu") if fmu is None else fmu
     command = profile(experiment)
     stop = command.duration if stop_time is None else stop_time
     n = steps(step, stop)                               # before anything is opened
     parameters = dict(mode="udp", rig=rig, key_file=str(key_file or ""), timeout=timeout,
                       retries=retries, loss_budget=loss_budget)
-    notes = {"notes": f"recorded from {rig}, experiment {experiment}"}
+    notes = {"notes": f"recorded from {rig}, experiment {experiment}", **_rig_values(machine, "boom")}
     rows = 0
     with FmuInstance(fmu, name="hardware_bridge") as bridge:
         bridge.initialize(parameters, start_time=0.0, stop_time=stop, inputs={"u": command(0.0)["u"]})
         y = bridge.get(*OUTPUTS)                        # the sample at t_0: the rig has answered
         with RecordingWriter(out, COLUMNS, sidecar={**notes, "incomplete": "the recorder did not finish "
                                                     "(killed or still running)"},
-                             inputs=_inputs(fmu, key_file)) as w:
+                             inputs=_inputs(fmu, key_file)) as w, _Sigint() as sigint:
             for k in range(n):
                 t = k * step
                 u = command(t)["u"]
                 bridge.set(u=u)
                 try:
+                    if sigint.hit:
+                        raise KeyboardInterrupt
                     bridge.step_to(t, step)
                 except (FmuError, KeyboardInterrupt) as e:
                     w.write((t, u, y["p_a"], y["p_b"], y["alpha"], y["f_ext"], y["x"], u, 0.0,
@@ -156,7 +195,8 @@ def record_experiment(fmu, rig: str, out, experiment: str = "paper_multistep", s
 
 def record_excavator_experiment(fmu, rig: str, out, experiment: str = "digging_cycle", step: float = 1e-3,
                                 stop_time: float | None = None, key_file: str | None = None,
-                                timeout: float = 0.05, retries: int = 2, loss_budget: int = 20) -> dict:
+                                timeout: float = 0.05, retries: int = 2, loss_budget: int = 20,
+                                machine=None) -> dict:
     """:func:`record_experiment` for the whole excavator: the excavator experiment
     ``experiment`` (``experiments.excavator_profile``) through the ``excavator_bridge``
     FMU ``fmu`` to the excavator rig at ``rig``, written to ``out`` in
@@ -167,7 +207,7 @@ def record_excavator_experiment(fmu, rig: str, out, experiment: str = "digging_c
     n = steps(step, stop)                               # before anything is opened
     parameters = dict(mode="udp", rig=rig, key_file=str(key_file or ""), timeout=timeout,
                       retries=retries, loss_budget=loss_budget)
-    notes = {"notes": f"recorded from {rig}, excavator experiment {experiment}"}
+    notes = {"notes": f"recorded from {rig}, excavator experiment {experiment}", **_rig_values(machine, "excavator")}
 
     def cmds(t):
         c = command(t)
@@ -184,12 +224,14 @@ def record_excavator_experiment(fmu, rig: str, out, experiment: str = "digging_c
         y = bridge.get(*EXCAVATOR_OUTPUTS)
         with RecordingWriter(out, EXCAVATOR_COLUMNS, sidecar={**notes, "incomplete": "the recorder did not finish "
                                                               "(killed or still running)"},
-                             inputs=_inputs(fmu, key_file)) as w:
+                             inputs=_inputs(fmu, key_file)) as w, _Sigint() as sigint:
             for k in range(n):
                 t = k * step
                 u = cmds(t)
                 bridge.set(**{f"u_{j}": c for j, c in zip(JOINTS, u)})
                 try:
+                    if sigint.hit:
+                        raise KeyboardInterrupt
                     bridge.step_to(t, step)
                 except (FmuError, KeyboardInterrupt) as e:
                     w.write(row(t, u, y, u, 0.0))

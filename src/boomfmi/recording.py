@@ -31,8 +31,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ._json import read_object
 from .physics import Cylinder, Geometry, Valve, alpha_from_x, reference_rig
-from .physics.excavator import JOINTS
+from .physics.excavator import JOINTS, excavator_from_values, excavator_value_names
 from .physics import (Gas, Load, ParameterError, check_cylinder, check_gas, check_geometry, check_load,
                       check_valve)
 from .physics.params import L_MAX
@@ -46,6 +47,19 @@ REQUIRED = ("t", "u", "p_a", "p_b", "alpha")
 #: parameter names (SI, pressures absolute), plus the spec's own example key.
 RIG_KEYS = ("A_max", "P_s", "P_e", "k", "R", "T", "A_a", "A_b", "L", "V_a0", "V_b0", "a", "b",
             "h", "l_min", "K_v", "F_s", "F_d", "F_L", "M", "P_atm", "supply_pressure_gauge")
+#: Each rig value's SI unit (a machine file may give any unit of its dimension: ``machine.py``).
+RIG_UNITS = {"A_max": "m2", "P_s": "Pa", "P_e": "Pa", "k": "1", "R": "J/(kg.K)", "T": "K", "A_a": "m2",
+             "A_b": "m2", "L": "m", "V_a0": "m3", "V_b0": "m3", "a": "m", "b": "m", "h": "m", "l_min": "m",
+             "K_v": "N.s/m", "F_s": "N", "F_d": "N", "F_L": "N", "M": "kg", "P_atm": "Pa",
+             "supply_pressure_gauge": "Pa"}
+#: The whole excavator's values a sidecar may set (``physics.excavator.excavator_from_values``:
+#: ``<field>_<joint>``, ``<field>_<link>``, h, pivot_forward, pivot_height, P_atm), SI units.
+EXCAVATOR_RIG_KEYS = excavator_value_names()
+_FIELD_UNITS = {"bore": "m", "rod": "m", "stroke": "m", "c1": "m", "c2": "m", "l_min": "m", "lower": "rad",
+                "A_max": "m2", "V_a0": "m3", "V_b0": "m3", "K_v": "N.s/m", "F_s": "N", "F_d": "N",
+                "length": "m", "mass": "kg", "com": "m", "h": "m", "pivot_forward": "m", "pivot_height": "m",
+                "P_atm": "Pa"}
+EXCAVATOR_RIG_UNITS = {k: _FIELD_UNITS[k if k in _FIELD_UNITS else k.rsplit("_", 1)[0]] for k in EXCAVATOR_RIG_KEYS}
 OPTIONAL = ("f_ext", "x")
 #: (``JOINTS``, the excavator's joints, are the linkage's: ``physics.excavator.JOINTS``.)
 #: An excavator recording's required columns: t, then each quantity for every joint.
@@ -314,28 +328,39 @@ def read_sidecar(side) -> dict:
     side = Path(side)
     if not side.is_file():
         raise RecordingError(side, "no such file")
-    try:
-        content = json.loads(side.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise RecordingError(side, f"the sidecar is not valid JSON: {e}") from None
-    if not isinstance(content, dict):
-        raise RecordingError(side, "the sidecar must hold a JSON object")
-    for k in content:
-        if k not in SIDECAR_KEYS:
-            raise RecordingError(side, f"unknown key {k!r}; a sidecar may hold {', '.join(SIDECAR_KEYS)}")
+    content = read_object(side, SIDECAR_KEYS, "sidecar", RecordingError)
     for k in ("notes", "incomplete"):
         if k in content and not isinstance(content[k], str):
             raise RecordingError(side, f"{k!r} must be text, not {content[k]!r}")
     rig_over = content.get("rig", {})
     if not isinstance(rig_over, dict):
         raise RecordingError(side, "'rig' must be an object of reference-rig values")
+    excavator = any(k in EXCAVATOR_RIG_KEYS and k not in RIG_KEYS for k in rig_over)
+    keys = EXCAVATOR_RIG_KEYS if excavator else RIG_KEYS
     for k, v in rig_over.items():
-        if k not in RIG_KEYS:
-            raise RecordingError(side, f"unknown rig value {k!r}; a sidecar may set {', '.join(RIG_KEYS)}")
+        if k not in keys:
+            if k in RIG_KEYS or k in EXCAVATOR_RIG_KEYS:
+                raise RecordingError(side, f"rig value {k!r} is the {'boom' if excavator else 'excavator'}'s, beside "
+                                           f"the {'excavator' if excavator else 'boom'}'s values: one machine's only")
+            raise RecordingError(side, f"unknown rig value {k!r}; a sidecar may set the boom's "
+                                       f"{', '.join(RIG_KEYS)} or the excavator's <field>_<joint> "
+                                       f"({', '.join(f for f in ('bore', 'rod', 'stroke', 'c1', 'c2', 'l_min'))}, ...)")
         if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
             raise RecordingError(side, f"rig value {k!r} must be a finite number, not {v!r}")
-    check_rig_values(rig_over, side)
+    if excavator:
+        check_excavator_values(rig_over, side)
+    else:
+        check_rig_values(rig_over, side)
     return content
+
+
+def check_excavator_values(rig: dict, side) -> None:
+    """Raise :class:`RecordingError` naming ``side`` and the value where the excavator's
+    ``rig`` values leave the machine outside the physics' bounds."""
+    try:
+        excavator_from_values(rig)
+    except ParameterError as e:
+        raise RecordingError(side, f"rig value {e.name!r} is outside the physics' bounds: {e}") from None
 
 
 def check_rig_values(rig: dict, side) -> None:
@@ -369,15 +394,18 @@ def check_rig_values(rig: dict, side) -> None:
                                    f"physics' bounds: {e}") from None
 
 
-def read_checked(paths, kind: str | None = None, role: str = "recording") -> list[Recording]:
+def read_checked(paths, kind: str | None = None, role: str = "recording", machine=None) -> list[Recording]:
     """Read recordings for identification or diagnosis: each must be complete (not
     marked ``incomplete`` in its sidecar), plausible (:func:`check_plausible`) and,
     with ``kind="excavator"``, the whole excavator's (``role`` names them in the
-    errors: "fit recording", "holdout").  ``ValueError`` or
-    :class:`RecordingError` naming the file."""
+    errors: "fit recording", "holdout").  ``machine``: a ``machine.MachineFile`` whose
+    values each recording takes (its sidecar's own values must agree).  ``ValueError``
+    or :class:`RecordingError` naming the file."""
     recs = []
     for p in paths:
         r = read_recording(p)
+        if machine is not None:
+            r = machine.apply(r)
         if kind == "excavator" and r.kind != "excavator":
             raise ValueError(f"{r.path}: a boom recording; this {role} must be the whole excavator's "
                              f"(u_<joint>, p_a_<joint>, p_b_<joint>, angle_<joint>)")
@@ -593,7 +621,8 @@ def _check_alpha(rec: Recording) -> None:
     if abs(value) > MAX_ANGLE or lo - ALPHA_MARGIN <= math.radians(value) <= hi + ALPHA_MARGIN:
         hint = f"is it in degrees ({value:g} deg = {math.radians(value):.4g} rad)?"
     else:
-        hint = "is it in another unit, or is the rig's geometry (a, b, l_min, L) not the sidecar's?"
+        hint = ("is it in another unit, or is the rig's geometry (a, b, l_min, L) not the sidecar's? Describe "
+                "the machine with --machine FILE (boomfmi machine init)")
     raise RecordingError(rec.path, f"the boom angle {value!r} rad lies outside its physical range, "
                                    f"{lo:.4g} to {hi:.4g} rad ({math.degrees(lo):.1f} to {math.degrees(hi):.1f} deg: "
                                    f"the stroke's ends by Eq. 12 at the rig's geometry, +-{ALPHA_MARGIN:g} rad); the "
