@@ -17,14 +17,13 @@ joint (``model.excavator_reference.friction_hook``), so that any friction effect
 any joint.
 """
 import math
-from dataclasses import replace
 
 from boomfmi_linkage_lib.fmislave import L_MAX, BoomSlave, effect_options, input, option_values, output, parameter
 from boomfmi_linkage_lib.model import Boom, Model, effects_from_options
 from boomfmi_linkage_lib.model.excavator_reference import friction_hook
 from boomfmi_linkage_lib.physics import reference_rig
-from boomfmi_linkage_lib.physics.excavator import (JOINTS, LINKS, Excavator, Link, advance_linkage,
-                                                   angles_and_tip, check_excavator)
+from boomfmi_linkage_lib.physics.excavator import (JOINTS, LINKS, Excavator, advance_linkage, angles_and_tip,
+                                                   excavator_from_values, excavator_value_names)
 from boomfmi_linkage_lib.physics.validation import ParameterError, require_non_negative
 
 _EX = Excavator()
@@ -115,21 +114,11 @@ class Linkage(BoomSlave):
         self._friction = None
 
     def setup(self):
-        acts = {}
-        for j in JOINTS:
-            old = getattr(_EX, j)
-            acts[j] = replace(old, **{f: getattr(self, f"{f}_{j}") for f in
-                                      ("bore", "rod", "stroke", "c1", "c2", "l_min", "K_v", "F_s", "F_d")},
-                              lower=None if j == "boom" else getattr(self, f"lower_{j}"))
-        # each link a slender rod, inertia m L^2 / 12 about its centre (excavator.md); the
-        # upper structure's inertia about z and g are excavator.md's (boomfmi.units has no kg.m2)
-        links = {f"{n}_link": Link(getattr(self, f"length_{n}"), getattr(self, f"mass_{n}"),
-                                   getattr(self, f"com_{n}"),
-                                   getattr(self, f"mass_{n}") * getattr(self, f"length_{n}") ** 2 / 12.0)
-                 for n in LINKS}
-        ex = replace(_EX, **acts, **links, boom_h=self.h, pivot_forward=self.pivot_forward,
-                     pivot_height=self.pivot_height, P_atm=self.P_atm)
-        check_excavator(ex)
+        # the machine from this FMU's values, by their names (physics.excavator_from_values:
+        # each link a slender rod, inertia m L^2 / 12 about its centre; the upper structure's
+        # inertia about z and g are excavator.md's), checked naming the value
+        declared = {v.name for v in self.variables}
+        ex = excavator_from_values({n: getattr(self, n) for n in excavator_value_names() if n in declared}, _EX)
         require_non_negative("payload", self.payload)
         for j in JOINTS:
             x0, L = getattr(self, f"x0_{j}"), getattr(ex, j).stroke
