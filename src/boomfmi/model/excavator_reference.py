@@ -46,7 +46,7 @@ from ..physics import reference_rig
 from ..physics.excavator import (JOINTS, Excavator, advance_linkage, excavator_parameters, joint_angles,
                                  pistons_from_angles)
 from .boom import Boom, Model, check_effects
-from .catalogue import EFFECTS
+from .catalogue import EFFECTS, fmu_variable
 
 
 def holding_pressures(ex: Excavator, x0, p_b0: float | None = None, payload: float = 0.0):
@@ -151,13 +151,10 @@ def joint_fmu_variable(effect: str, parameter: str, joint: str) -> str | None:
     measurement path: ``model.measure`` on the outputs)."""
     if joint not in JOINTS:
         raise ph.ParameterError("joint", joint, f"not a joint of the excavator ({', '.join(JOINTS)})")
-    e = EFFECTS[effect]
-    option = next(p.option for p in e.parameters if p.name == parameter)
-    if e.stage == "measurement":
+    if EFFECTS[effect].stage == "measurement":
         return None
-    if e.fmu == "boom_load":
-        return f"linkage.{option}_{joint}"
-    return f"{e.fmu}_{joint}.{option}"
+    fmu, option = fmu_variable(effect, parameter).split(".", 1)
+    return f"linkage.{option}_{joint}" if fmu == "boom_load" else f"{fmu}_{joint}.{option}"
 
 
 def friction_hook(boom: Boom, load: ph.Load):
