@@ -33,7 +33,7 @@ answer to the command); the load cut the ``friction``
 stage's (stribeck_friction, pressure_friction, each law), with the joint's load
 re-identified with the effect on (``joint_load.fit_load_effect``), then the load (the
 baseline's as each candidate's) refined by the load cut's own output error on the fit
-recordings (:func:`refined_load`).  Every law of an
+recordings (:func:`joint_load.refine_load`).  Every law of an
 effect is fitted as ``attribute`` fits the boom's: each law screened over the catalogue's
 bounds and refined (a bounded scalar search, or Nelder-Mead for several parameters), the
 best kept, a law that holds its parameters and more grown from its fit where it lowers
@@ -370,47 +370,16 @@ def _fit_pair(job):
     return list(names), fx, cost, _hold_gaps(joint, ex, fx, hold_cuts, others)
 
 
-#: the load's output-error refinement: Nelder-Mead's evaluations at most, and its first
-#: steps (log10 of a factor on K_v, F_d, F_s)
-LOAD_EVALUATIONS = 40
-LOAD_STEP = 0.05
-
-
-def refined_load(jl, cuts, values: dict, effects: dict) -> tuple[dict, float]:
-    """The joint's load ``values`` (K_v, F_d, F_s, identified by ``joint_load``'s equation
-    and velocity errors) refined by the load cut's own output error on ``cuts`` with
-    ``effects`` held: ``(values, mean gap)``.  The baseline and every friction candidate
-    get the same refinement, so that a friction effect fitted by the cut's output error
-    is not compared with a load that was not (it would take up the load's misfit: a
-    Stribeck curve on an effect-free machine)."""
-    from scipy.optimize import minimize
-
-    def at(z):
-        K_v, F_d = values["K_v"] * 10 ** z[0], values["F_d"] * 10 ** z[1]
-        return dict(values, K_v=K_v, F_d=F_d, F_s=max(values["F_s"] * 10 ** z[2], F_d))
-
-    def cost(z):
-        return float(np.mean([jl.load_gap(c, at(z), effects) for c in cuts]))
-    z0 = np.zeros(3)
-    simplex = np.vstack([z0, *(LOAD_STEP * np.eye(3))])
-    res = minimize(cost, z0, method="Nelder-Mead",
-                   options={"maxfev": LOAD_EVALUATIONS, "initial_simplex": simplex, "xatol": 1e-3, "fatol": 1e-7})
-    c0 = cost(z0)
-    if not (res.fun < c0):
-        return dict(values), c0
-    return {k: float(v) for k, v in at(res.x).items()}, float(res.fun)
-
-
 def _fit_load(job):
     """A friction effect on one joint's load cut (``joint_load.fit_load_effect``: the
-    joint's load re-identified at each value; then :func:`refined_load`), scored on the
+    joint's load re-identified at each value; then :func:`joint_load.refine_load`), scored on the
     holdouts' load cuts; the reason where it cannot be fitted."""
     from . import joint_load as jl
     _, joint, name, fit_cuts, hold_cuts = job
     try:
         params, values, _ = jl.fit_load_effect(fit_cuts, name)
         fx = {name: params}
-        values, fit_gap = refined_load(jl, fit_cuts, values, fx)
+        values, fit_gap = jl.refine_load(fit_cuts, values, fx)
         return name, fx, fit_gap, [jl.load_gap(c, values, fx) for c in hold_cuts], values
     except (ValueError, ArithmeticError) as e:
         return f"{joint}'s load with {name}: {e}"
@@ -489,7 +458,7 @@ def _own_load(f: JointFinding, jl, hold_cuts, notes: list) -> None:
     said in the notes.  Nothing is fitted on the holdout for a candidate's score."""
     lc = f.position
     try:
-        own = [refined_load(jl, [c], jl.identify_load([c], {}), {})[1] for c in hold_cuts]
+        own = [jl.refine_load([c], jl.identify_load([c], {}), {})[1] for c in hold_cuts]
     except (ValueError, ArithmeticError) as e:
         # the holdout holds too little of the joint's motion to tell a gap of its load
         # from the load's own uncertainty: not judged, said
@@ -550,7 +519,7 @@ def diagnose_excavator(fit, hold, ex: exc.Excavator = exc.Excavator(), joints=ex
             try:
                 load_fit[joint] = [jl.load_cut(r, joint, ex) for r in fit]
                 load_hold[joint] = [jl.load_cut(r, joint, ex) for r in hold]
-                values, fit_gap = refined_load(jl, load_fit[joint], jl.identify_load(load_fit[joint], {}), {})
+                values, fit_gap = jl.refine_load(load_fit[joint], jl.identify_load(load_fit[joint], {}), {})
                 lc = CutFinding("position", [jl.load_gap(c, values, {}) for c in load_hold[joint]],
                                 [jl.load_noise(c) for c in load_hold[joint]], values=values)
                 lc.fit_gap = fit_gap

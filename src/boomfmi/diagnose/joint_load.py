@@ -466,5 +466,36 @@ def fit_load_effect(fit_cuts, name: str, form=None):
     return best
 
 
-__all__ = ["LoadCut", "load_cut", "load_noise", "load_gap", "identify_load", "fit_load_effect", "simulate",
+#: the load's output-error refinement: Nelder-Mead's evaluations at most, and its first
+#: steps (log10 of a factor on K_v, F_d, F_s)
+LOAD_EVALUATIONS = 40
+LOAD_STEP = 0.05
+
+
+def refine_load(cuts, values: dict, effects: dict) -> tuple[dict, float]:
+    """The joint's load ``values`` (K_v, F_d, F_s, identified by :func:`identify_load`'s equation
+    and velocity errors) refined by the load cut's own output error on ``cuts`` with
+    ``effects`` held: ``(values, mean gap)``.  The baseline and every friction candidate
+    get the same refinement, so that a friction effect fitted by the cut's output error
+    is not compared with a load that was not (it would take up the load's misfit: a
+    Stribeck curve on an effect-free machine)."""
+    from scipy.optimize import minimize
+
+    def at(z):
+        K_v, F_d = values["K_v"] * 10 ** z[0], values["F_d"] * 10 ** z[1]
+        return dict(values, K_v=K_v, F_d=F_d, F_s=max(values["F_s"] * 10 ** z[2], F_d))
+
+    def cost(z):
+        return float(np.mean([load_gap(c, at(z), effects) for c in cuts]))
+    z0 = np.zeros(3)
+    simplex = np.vstack([z0, *(LOAD_STEP * np.eye(3))])
+    res = minimize(cost, z0, method="Nelder-Mead",
+                   options={"maxfev": LOAD_EVALUATIONS, "initial_simplex": simplex, "xatol": 1e-3, "fatol": 1e-7})
+    c0 = cost(z0)
+    if not (res.fun < c0):
+        return dict(values), c0
+    return {k: float(v) for k, v in at(res.x).items()}, float(res.fun)
+
+
+__all__ = ["refine_load", "LoadCut", "load_cut", "load_noise", "load_gap", "identify_load", "fit_load_effect", "simulate",
            "X_SPAN_MIN", "REST"]
