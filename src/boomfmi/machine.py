@@ -32,7 +32,8 @@ from pathlib import Path
 from ._json import read_object
 from .foreign import units
 from .physics import reference_rig
-from .physics.excavator import Excavator, excavator_from_values
+from .physics.excavator import (ACTUATOR_FIELDS, JOINTS, LINK_FIELDS, LINKS, MACHINE_FIELDS, Excavator,
+                                excavator_from_values)
 from .recording import (EXCAVATOR_RIG_UNITS, RIG_UNITS, Recording, check_excavator_values, check_rig_values,
                         RecordingError)
 
@@ -66,15 +67,10 @@ def reference_values(kind: str) -> dict:
         out.pop("supply_pressure_gauge", None)
         return out
     ex = Excavator()
-    out = {}
-    for k in EXCAVATOR_RIG_UNITS:
-        name, _, owner = k.rpartition("_")
-        if owner in ("swing", "boom", "arm", "bucket") and name and k not in ("pivot_forward", "pivot_height"):
-            if owner in ("boom", "arm", "bucket") and name in ("length", "mass", "com"):
-                out[k] = float(getattr(getattr(ex, f"{owner}_link"), name))
-            else:
-                out[k] = float(getattr(getattr(ex, owner), name))
-    out.update(h=ex.boom_h, pivot_forward=ex.pivot_forward, pivot_height=ex.pivot_height, P_atm=ex.P_atm)
+    out = {f"{f}_{j}": float(getattr(getattr(ex, j), f))
+           for j in JOINTS for f in ACTUATOR_FIELDS if not (f == "lower" and j == "boom")}
+    out.update({f"{f}_{n}": float(getattr(getattr(ex, f"{n}_link"), f)) for n in LINKS for f in LINK_FIELDS})
+    out.update({k: float(getattr(ex, attr)) for k, attr in MACHINE_FIELDS.items()})
     return out
 
 
