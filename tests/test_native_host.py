@@ -27,20 +27,9 @@ import pytest
 
 from boomfmi.system import simulate_ssp
 
-SCENARIO = """<?xml version="1.0" encoding="UTF-8"?>
-<ecos:Scenario xmlns:ecos="http://github.com/Ecos-platform/libecos/resources/schema/ScenarioConfig" eps="0.0001">
-  <ecos:action t="0"><ecos:variable id="valve::u"><ecos:real value="10.0"/></ecos:variable></ecos:action>
-  <ecos:action t="0.5"><ecos:variable id="valve::u"><ecos:real value="1.0"/></ecos:variable></ecos:action>
-</ecos:Scenario>
-"""
-CSV_CONFIG = """<?xml version="1.0" encoding="UTF-8"?>
-<ecos:CsvConfig xmlns:ecos="http://github.com/Ecos-platform/libecos/resources/schema/CsvConfig">
-  <ecos:components>
-    <ecos:component name="boom_load"><ecos:variable name="x"/></ecos:component>
-    <ecos:component name="cylinder"><ecos:variable name="p_a"/><ecos:variable name="p_b"/></ecos:component>
-  </ecos:components>
-</ecos:CsvConfig>
-"""
+HOSTS = Path(__file__).resolve().parents[1] / "examples" / "hosts"
+SCENARIO = (HOSTS / "ecos" / "scenario.xml").read_text()      # the example's (tests/test_hosts.py runs it)
+CSV_CONFIG = (HOSTS / "ecos" / "csv.xml").read_text()
 FMI2_CS_EXPORTS = ("fmi2GetTypesPlatform", "fmi2GetVersion", "fmi2SetDebugLogging", "fmi2Instantiate",
                    "fmi2FreeInstance", "fmi2SetupExperiment", "fmi2EnterInitializationMode",
                    "fmi2ExitInitializationMode", "fmi2Terminate", "fmi2Reset", "fmi2GetReal",
@@ -90,24 +79,6 @@ def run_ecos(ssp_path: Path, tmp: Path, stop_time: float = 1.5, **env_vars) -> s
 def data_rows(tmp: Path) -> int:
     csv = tmp / "excavator_boom.csv"
     return max(0, len(csv.read_text().splitlines()) - 1) if csv.is_file() else 0
-
-
-def test_ecos_runs_the_ssp_with_no_preload_and_no_pythonpath(ssp_path, tmp_path):
-    proc = run_ecos(ssp_path, tmp_path)
-    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
-    out = pd.read_csv(tmp_path / "excavator_boom.csv", skipinitialspace=True)
-    out.columns = [c.strip() for c in out.columns]
-    x, p_a = "boom_load::x[REAL]", "cylinder::p_a[REAL]"
-    assert out[x].iloc[-1] == pytest.approx(0.06)
-    # ecos steps like boomfmi's Jacobi master (it writes 6 decimals)
-    ours = simulate_ssp(ssp_path, stop_time=1.5, step=1e-3, algorithm="jacobi",
-                        inputs=lambda t: {"valve.u": 10.0 if t < 0.5 else 1.0})
-    theirs = out.set_index(np.round(out["time"].to_numpy(), 6))
-    mine = ours.set_index(np.round(ours["time"].to_numpy(), 6))
-    common = theirs.index.intersection(mine.index)
-    assert len(common) > 1000
-    np.testing.assert_allclose(theirs.loc[common, p_a], mine.loc[common, "cylinder.p_a"], rtol=1e-5)
-    np.testing.assert_allclose(theirs.loc[common, x], mine.loc[common, "boom_load.x"], rtol=0, atol=1e-6)
 
 
 def test_without_the_python_runtime_ecos_stops_and_says_why(ssp_path, tmp_path):

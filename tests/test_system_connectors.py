@@ -62,24 +62,6 @@ def test_the_ssds_declare_a_system_input_per_valve_wired_to_its_command(ssp_path
         sorted(f"u_{j} -> valve_{j}.u" for j in JOINTS)
 
 
-def test_fmpy_runs_paper_multistep_on_the_boom_as_the_jacobi_master(ssp_path):
-    profile = paper_multistep()
-    theirs = run_fmpy(ssp_path, profile, profile.duration, "reference_rig")
-    ours = simulate_ssp(ssp_path, profile.duration, H, "jacobi", inputs=profile)
-    n = min(len(theirs), len(ours))
-    assert n >= round(profile.duration / H)
-    np.testing.assert_allclose(theirs["time"][:n], ours["time"].iloc[:n], rtol=0, atol=1e-9)
-    # the command of each row (fmpy records valve.u once the connection has copied it,
-    # for the valve's next step) at every breakpoint too: 3 s and 4 s are
-    # 2.9999999999997806 and 3.9999999999996705 in fmpy's float time
-    np.testing.assert_array_equal(theirs["valve.u"][:n], ours["valve.u"].to_numpy()[:n])
-    figures = {c: nrmse(theirs, ours, c, n) for c in ("boom_load.x", "cylinder.p_a", "cylinder.p_b")}
-    assert max(figures.values()) < 1e-3, figures          # 2.4e-8, 5.8e-4, 1.9e-5 seen
-    late = ours["time"].to_numpy()[:n] >= LATE
-    assert np.abs(theirs["boom_load.x"][:n][late] - ours["boom_load.x"].to_numpy()[:n][late]).max() < 1e-6
-    assert np.ptp(ours["boom_load.x"]) == pytest.approx(0.06)   # the boom ran its stroke
-
-
 def test_fmpy_runs_the_digging_cycle_on_the_excavator(excavator_ssp):
     """Within 1 % NRMSE but for chamber A's pressure of the joints whose valve stays
     closed for a while: fmpy's first step hands every valve 0 V (full extend), and the
