@@ -72,11 +72,12 @@ def test_wiring(excavator_ssp):
     assert sorted(comps) == sorted([f"{k}_{j}" for k in ("valve", "cylinder") for j in JOINTS] + ["linkage"])
     conns = {(c.get("startElement"), c.get("startConnector"), c.get("endElement"), c.get("endConnector"))
              for c in root.iter(f"{{{NS['ssd']}}}Connection")}
-    assert len(conns) == 4 * 10 + 4                             # + u_<joint> -> valve_<joint>.u
+    assert len(conns) == 4 * 12 + 4                             # + u_<joint> -> valve_<joint>.u
     for j in JOINTS:
         assert ("cylinder_" + j, "p_a", "linkage", f"p_a_{j}") in conns
         assert ("linkage", f"x_{j}", "cylinder_" + j, "x") in conns
         assert ("valve_" + j, "dmdot_b_dp_b", "cylinder_" + j, "dmdot_b_dp_b") in conns
+        assert ("valve_" + j, "p_b_flow", "cylinder_" + j, "p_b_flow") in conns
     assert sum(n.endswith(".fmu") for n in names) == 3          # each FMU packed once
 
 
@@ -270,7 +271,7 @@ def test_cosimulation_within_one_percent_of_the_monolithic_reference(excavator_s
 
 
 def test_fmpy_wires_the_connections_the_ssd_declares(excavator_ssp):
-    """fmpy's SSP reader resolves exactly the SSD's forty-four connections (no undeclared
+    """fmpy's SSP reader resolves exactly the SSD's fifty-two connections (no undeclared
     free input for it to mis-wire; a system connector is named bare, u_swing)."""
     fmpy_ssd = pytest.importorskip("fmpy.ssp.ssd")
     from boomfmi.system.ssp import read_ssp
@@ -279,4 +280,4 @@ def test_fmpy_wires_the_connections_the_ssd_declares(excavator_ssp):
     theirs = {(fmpy_ssd.build_path(a)[cut:], fmpy_ssd.build_path(b)[cut:])
               for a, b in fmpy_ssd.get_connections(ssd.system)}
     ours = {tuple(c.describe().split(" -> ")) for c in read_ssp(excavator_ssp).connections}
-    assert theirs == ours and len(ours) == 44             # 40 + the system's u_<joint> -> valve_<joint>.u
+    assert theirs == ours and len(ours) == 52             # 48 + the system's u_<joint> -> valve_<joint>.u

@@ -92,6 +92,25 @@ def test_cosimulation_matches_the_monolithic_reference(ssp_path, algorithm):
         assert err / (ref[name].max() - ref[name].min()) < 0.01, name
 
 
+def test_jacobi_holds_the_end_stop_as_gauss_seidel_does(ssp_path, tmp_path):
+    """Issue 36, item 6: valve.u = 1 V held, the piston on its stop.  A host stepping
+    Jacobi hands the cylinder the valve's flows of the previous communication point; the
+    valve passes the pressures it evaluated them at (p_a_flow, p_b_flow) and the cylinder
+    carries them along their slopes to its own.  Without those two connections chamber
+    B's pressure alternates about the exhaust's every step."""
+    def tail(ssp, algorithm):
+        co = simulate_ssp(ssp, stop_time=1.5, step=1e-3, algorithm=algorithm, inputs={"valve.u": 1.0})
+        assert co["boom_load.x"].iloc[-1] == pytest.approx(reference_rig.L)      # on its stop
+        return co.iloc[-500:][["cylinder.p_a", "cylinder.p_b"]].to_numpy()
+    gauss_seidel = tail(ssp_path, "gauss-seidel")
+    assert np.abs(gauss_seidel[:, 1] - reference_rig.P_atm).max() < 1.0
+    assert np.abs(tail(ssp_path, "jacobi") - gauss_seidel).max() < 244.0       # the sensors' noise floor
+    at_cylinder = rewrite_ssp(ssp_path, tmp_path / "at_cylinder.ssp", edit=lambda s: re.sub(
+        r'\s*<ssd:Connection startElement="valve" startConnector="p_[ab]_flow"[^>]*/>', "", s))
+    chatter = tail(at_cylinder, "jacobi")[:, 1]
+    assert np.abs(chatter - reference_rig.P_atm).max() > 244.0 and np.std(np.diff(chatter)) > 244.0
+
+
 def test_extra_parameters_are_applied(ssp_path, tmp_path):
     moved = simulate_ssp(ssp_path, stop_time=0.002, parameters={"boom_load.x0": 0.03})
     assert moved["boom_load.x"][0] == 0.03

@@ -212,8 +212,9 @@ def test_ecos_runs_a_portable_ssp_on_another_machine_as_our_master(portable_ssp,
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     out = pd.read_csv(tmp_path / "excavator_boom.csv", skipinitialspace=True)
     out.columns = [c.strip() for c in out.columns]
+    from boomfmi.experiments import paper_multistep     # the command of examples/hosts/ecos/scenario.xml
     ours = simulate_ssp(ssp_path, stop_time=1.5, step=1e-3, algorithm="jacobi",      # the lean build, in fmpy
-                        inputs=lambda t: {"valve.u": 10.0 if t < 0.5 else 1.0})
+                        inputs=lambda t: {"valve.u": paper_multistep()(t)["u"]})
     theirs = out.set_index(np.round(out["time"].to_numpy(), 6))
     mine = ours.set_index(np.round(ours["time"].to_numpy(), 6))
     common = theirs.index.intersection(mine.index)

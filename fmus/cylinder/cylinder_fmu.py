@@ -6,7 +6,10 @@ communication step the flows are held and the piston moves linearly with the inp
 velocity; the energy balance of Eq. 4 is then integrated exactly, so the step is
 stable for any step size.  Where the valve also passes each flow's slope with respect
 to the chamber pressure, the chambers are integrated against that linearisation of the
-flow (an exponential integrator, stable however short the chamber's time constant).
+flow (an exponential integrator, stable however short the chamber's time constant);
+where it passes the pressures it evaluated them at too (``p_a_flow``, ``p_b_flow``), the
+flows are first carried along their slopes to the chambers' present pressures (a host
+stepping Jacobi hands over the flows of the previous communication point).
 
 Unmodelled effects, off by default (``model/catalogue.py``, forms in ``physics/effects.py``): ``C_leak`` > 0 adds a
 laminar leak across the piston seal, ``A_leak`` > 0 a turbulent one through a gap of
@@ -22,7 +25,7 @@ from boomfmi_cylinder_lib.fmislave import (CYLINDER, L_MAX, P_S_MAX, BoomSlave, 
                                           option_values, output, parameter, rig_parameters)
 from boomfmi_cylinder_lib.model import Boom, Model, effects_from_options
 from boomfmi_cylinder_lib.physics import (Cylinder as CylinderParams, Gas, ParameterError,
-                                          Valve, check_cylinder, check_gas)
+                                          Valve, check_cylinder, check_gas, flow_at)
 from boomfmi_cylinder_lib.physics import reference_rig
 from boomfmi_cylinder_lib.physics.effects import check_cushion_port
 
@@ -36,6 +39,10 @@ class Cylinder(BoomSlave):
         input("v", 0.0, "m/s", "piston velocity, positive extending"),
         input("dmdot_a_dp_a", 0.0, "kg/(s.Pa)", "slope of mdot_a with respect to p_a; 0 holds mdot_a over the step", max=0.0),
         input("dmdot_b_dp_b", 0.0, "kg/(s.Pa)", "slope of mdot_b with respect to p_b; 0 holds mdot_b over the step", max=0.0),
+        input("p_a_flow", 0.0, "Pa", "chamber A's pressure that mdot_a and its slope were evaluated at (the valve's p_a_flow): "
+              "mdot_a is carried along its slope to p_a; 0: evaluated at p_a", min=0.0),
+        input("p_b_flow", 0.0, "Pa", "chamber B's pressure that mdot_b and its slope were evaluated at (the valve's p_b_flow): "
+              "mdot_b is carried along its slope to p_b; 0: evaluated at p_b", min=0.0),
         output("p_a", reference_rig.P_atm, "Pa", "absolute pressure in chamber A (cap side)", min=0.0),
         output("p_b", reference_rig.P_atm, "Pa", "absolute pressure in chamber B (rod side)", min=0.0),
         *rig_parameters(*CYLINDER, "k", "R", "T"),
@@ -76,8 +83,11 @@ class Cylinder(BoomSlave):
         boom, L = self._boom, self.L
         x_0 = min(max(self.x, 0.0), L)
         x_1 = min(max(x_0 + self.v * dt, 0.0), L)
-        mdot_a, mdot_b, s_a, s_b = boom.inflows(self.mdot_a, self.mdot_b, min(self.dmdot_a_dp_a, 0.0),
-                                                min(self.dmdot_b_dp_b, 0.0), self.p_a, self.p_b, x_0)
+        s_a, s_b = min(self.dmdot_a_dp_a, 0.0), min(self.dmdot_b_dp_b, 0.0)
+        # the valve's flows at this step's pressures (a Jacobi host's are a step old)
+        mdot_a = flow_at(self.mdot_a, s_a, self.p_a, self.p_a_flow) if self.p_a_flow > 0.0 else self.mdot_a
+        mdot_b = flow_at(self.mdot_b, s_b, self.p_b, self.p_b_flow) if self.p_b_flow > 0.0 else self.mdot_b
+        mdot_a, mdot_b, s_a, s_b = boom.inflows(mdot_a, mdot_b, s_a, s_b, self.p_a, self.p_b, x_0)
         p_a, p_b = boom.step_chambers(self.p_a, self.p_b, x_0, x_1, mdot_a, mdot_b, s_a, s_b, dt, self._masses)
         if not (p_a > 0.0 and p_b > 0.0):
             raise ValueError(

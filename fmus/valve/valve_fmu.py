@@ -4,8 +4,10 @@ Inputs u [V] and the absolute chamber pressures; outputs the mass flows into eac
 chamber through the ports that the command opens (Eq. 1, standard form, and the
 reference rig's routing and A(u)), and each flow's slope with respect to its chamber's
 pressure, which lets the cylinder integrate its chambers against the valve's local
-linearisation (stable coupling at any communication step).  The outputs depend
-directly on the inputs.
+linearisation (stable coupling at any communication step), and the pressures they are
+evaluated at (``p_a_flow``, ``p_b_flow``: a host stepping Jacobi hands the cylinder the
+flows of the previous communication point, which it carries to its own pressures).  The
+outputs depend directly on the inputs.
 
 Unmodelled effects, off by default (``model/catalogue.py``, forms in ``physics/effects.py``): ``tau_spool`` > 0 lets the
 spool follow the command with a first-order lag (valve_dynamics; the spool position is
@@ -29,6 +31,8 @@ class Valve(BoomSlave):
         output("mdot_b", 0.0, "kg/s", "mass flow into chamber B (negative when B exhausts)", depends=("u", "p_a", "p_b")),
         output("dmdot_a_dp_a", 0.0, "kg/(s.Pa)", "slope of mdot_a with respect to p_a (<= 0)", depends=("u", "p_a", "p_b"), max=0.0),
         output("dmdot_b_dp_b", 0.0, "kg/(s.Pa)", "slope of mdot_b with respect to p_b (<= 0)", depends=("u", "p_a", "p_b"), max=0.0),
+        output("p_a_flow", reference_rig.P_atm, "Pa", "chamber A's pressure that mdot_a and its slope are evaluated at (the input p_a)", depends=("p_a",), min=0.0),
+        output("p_b_flow", reference_rig.P_atm, "Pa", "chamber B's pressure that mdot_b and its slope are evaluated at (the input p_b)", depends=("p_b",), min=0.0),
         *rig_parameters("P_s", "P_e"),
         parameter("A_max", reference_rig.A_max, "m2", "orifice area of each port at full opening", min=0.0),
         *rig_parameters("T", "k", "R"),
@@ -81,6 +85,14 @@ class Valve(BoomSlave):
     @property
     def dmdot_b_dp_b(self):
         return self._current_flows()[3]
+
+    @property
+    def p_a_flow(self):
+        return self.p_a
+
+    @property
+    def p_b_flow(self):
+        return self.p_b
 
     def step(self, t, dt):
         self._spool = self._boom.spool_step(self._spool, self.u, dt)

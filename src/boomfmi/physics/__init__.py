@@ -20,7 +20,7 @@ from .geometry import (alpha_from_x, check_geometry, cylinder_length, linkage_po
 from .lag import first_order_step
 from .load import (acceleration, advance_load, drive_force, friction_force, piston_force,
                    slide_or_stick, sliding_acceleration, sliding_velocity, end_stops)
-from .orifice import (critical_pressure_ratio, mass_flow, mass_flow_slope, signed_mass_flow,
+from .orifice import (critical_pressure_ratio, flow_at, mass_flow, mass_flow_slope, signed_mass_flow,
                       signed_mass_flow_slope)
 from .params import (Cylinder, Gas, Geometry, Load, Valve, check_cylinder, check_gas,
                      check_load, check_valve)
@@ -37,7 +37,7 @@ __all__ = [
     "critical_pressure_ratio", "mass_flow", "signed_mass_flow", "Cylinder", "Gas",
     "Geometry", "Load", "Valve", "check_cylinder", "check_gas", "check_load",
     "check_valve", "ParameterError", "chamber_flows", "orifice_area", "chamber_flow_slopes",
-    "mass_flow_slope", "signed_mass_flow_slope", "chamber_inflows", "sliding_acceleration",
+    "mass_flow_slope", "signed_mass_flow_slope", "flow_at", "chamber_inflows", "sliding_acceleration",
     "JOINTS", "Actuator", "Excavator", "Link", "advance_linkage", "check_excavator", "coriolis",
     "cylinder_forces", "cylinder_torques", "excavator_parameters", "forward_kinematics", "gravity",
     "joint_angles", "joint_limits", "kinetic_energy", "lever_arms", "lumped_boom_load", "mass_matrix",

@@ -87,6 +87,17 @@ def mass_flow_slope(A, P_u, P_d, gas: Gas = Gas()):
     return A * d_dr        # A P_u d/dr * dr/dP_d, with dr/dP_d = 1 / P_u
 
 
+def flow_at(mdot, slope, p, p_eval):
+    """A mass flow [kg/s] evaluated at chamber pressure ``p_eval`` [Pa], with its slope
+    ``slope`` [kg/(s.Pa)] there (:func:`signed_mass_flow_slope`), carried to the
+    chamber's pressure ``p`` [Pa] along that slope: ``mdot + slope (p - p_eval)``, the
+    first-order Taylor form of Eq. 1 about ``p_eval``.  A co-simulation stepped Jacobi
+    hands the chambers flows evaluated at the previous communication point's pressures;
+    carried to the present ones they no longer lag a step behind (which, at an end stop,
+    makes the exhausting chamber's pressure chatter about the exhaust's)."""
+    return mdot + slope * (p - p_eval)
+
+
 def signed_mass_flow(A, P_1, P_2, gas: Gas = Gas()):
     """Mass flow [kg/s] from side 1 to side 2, negative where it runs from 2 to 1.
 

@@ -348,6 +348,14 @@ class CoSimulation:
                 rows[k, j:j + len(vrs)] = got
                 j += len(vrs)
 
+        # consistent start values (FMI 2.0, 3.2.3: a connected input starts at its output's
+        # start value): a feedthrough output follows the other FMUs' start outputs, not its
+        # own inputs' start values (the valve's flows at the cylinders' start pressures).
+        # The inputs' values at t0 then reach it as in any Jacobi host (libcosim, fmpy, ecos).
+        for _ in self._feed_components:
+            for n in self._feed_components:
+                self._set_inputs(n, values)
+                self._read(n, self._feed_read, values)
         self._check_one_name_per_input(source(t0))
         take_inputs(t0)
         record_row(0, t0)
