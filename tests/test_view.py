@@ -262,6 +262,8 @@ def test_the_page_reconnects_after_its_websocket_drops(contact_run, driver):
         view.stop()                                              # the server goes away...
         _wait(driver, "return !window.boomView.connected")
         assert "reconnecting" in driver.find_element("id", "status").text
+        # the server closed the page's connection as it stopped (1001), not the page's timeout
+        assert driver.execute_script("return window.boomView.closeCode") == 1001
         view = View("--replay", str(contact_run), port=port)     # ...and comes back
         _wait(driver, "return window.boomView.connected && window.boomView.connections === 2", timeout=15)
         s = _wait(driver, "const s = window.boomView.state(); return s && Math.abs(s.t - 2.0) < 1e-6 && s")

@@ -97,6 +97,7 @@ RUN = web.AppKey("run", object)
 HUB = web.AppKey("hub", object)
 ORIGINS = web.AppKey("origins", frozenset)
 PAGES = web.AppKey("pages", list)             # [the WebSocket connections open]
+SOCKETS = web.AppKey("sockets", set)          # the open WebSockets, closed at shutdown
 
 
 class ViewError(RuntimeError):
@@ -339,7 +340,16 @@ def _open(request: web.Request) -> web.WebSocketResponse | web.Response:
     if pages[0] >= MAX_PAGES:
         return _refuse(503, f"{MAX_PAGES} pages are open already; close one")
     pages[0] += 1
-    return web.WebSocketResponse(heartbeat=5.0, max_msg_size=WS_MAX_MESSAGE)
+    ws = web.WebSocketResponse(heartbeat=5.0, max_msg_size=WS_MAX_MESSAGE)
+    request.app[SOCKETS].add(ws)
+    return ws
+
+
+async def _close_sockets(app: web.Application) -> None:
+    """At shutdown (SIGINT, SIGTERM) every page is told the server is going (1001) at
+    once; else aiohttp waits for each page's connection to end by itself."""
+    for ws in list(app[SOCKETS]):
+        await ws.close(code=WSCloseCode.GOING_AWAY, message=b"the view is stopping")
 
 
 # -- replay ----------------------------------------------------------------------------------
@@ -433,6 +443,7 @@ async def _replay_ws(request: web.Request) -> web.StreamResponse:
         pass
     finally:
         request.app[PAGES][0] -= 1
+        request.app[SOCKETS].discard(ws)
         if ticker is not None:
             ticker.cancel()
     return ws
@@ -545,6 +556,7 @@ async def _live_ws(request: web.Request) -> web.StreamResponse:
         pass
     finally:
         request.app[PAGES][0] -= 1
+        request.app[SOCKETS].discard(ws)
         hub.pages.discard(queue)
         if pumping is not None:
             pumping.cancel()
@@ -563,6 +575,8 @@ def make_app(run: Run | None = None, hub: LiveHub | None = None, origins=()) -> 
     app[RUN], app[HUB] = run, hub
     app[ORIGINS] = allowed_origins(origins)
     app[PAGES] = [0]
+    app[SOCKETS] = set()
+    app.on_shutdown.append(_close_sockets)
     app.on_response_prepare.append(_security_headers)
     app.router.add_get("/", _index)
     for url, (path, ctype, cache) in PAGE_FILES.items():

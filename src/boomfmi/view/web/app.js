@@ -17,7 +17,7 @@ const $ = (id) => document.getElementById(id);
 
 // -- the test and automation hook -----------------------------------------------------------
 const view = {
-  connected: false, connections: 0, framesReceived: 0, errors: [],
+  connected: false, connections: 0, closeCode: null, framesReceived: 0, errors: [],
   mode: null, t: null, playing: false, webgl: false, hello: null,
   _arrivals: [],
   fps() { const now = performance.now(); return this._arrivals.filter((a) => now - a <= 1000).length; },
@@ -550,12 +550,13 @@ function connect() {
     status.textContent = 'connected'; status.className = 'up';
   };
   socket.onmessage = onMessage;
-  socket.onclose = () => {
+  socket.onclose = (ev) => {
+    view.closeCode = ev.code;          // 1001: the server is stopping
     if (view.connected) wanted = last ? { t: last.t, playing: !!last.playing } : wanted;
     view.connected = false;
     status.textContent = 'reconnecting'; status.className = 'down';
     setTimeout(connect, retry);
-    retry = Math.min(5000, retry * 2);
+    retry = Math.min(2000, retry * 2);   // a local server: back within 2 s of its return
   };
   socket.onerror = () => {};       // onclose follows and retries; nothing to report twice
 }
