@@ -31,7 +31,11 @@ The machine
   its source's pressure in one step is set to it.
 * **Friction per cylinder**: Eq. 9 with the boom's K_v, F_s, F_d scaled by bore area;
   cos(phi) on the boom, 1 on the others.
-* **Hard end stops**, no bounce.
+* **Hard end stops**, no bounce: a plastic impact, the joint held at its stop from the
+  substep it reaches it in, the stop's reaction reaching the other joints through the
+  mass matrix (until 2026-11-27 the velocity was zeroed alone, as if the stop's impulse
+  acted on no other joint; a boom hitting its stop then left the arm and bucket
+  unmoved where the linkage's inertia moves them).
 
 The integrator
 --------------
@@ -505,43 +509,69 @@ def simulate(machine: Machine, profile, duration: float | None = None, seed: int
                 if v[i] != 0.0:
                     fric[i] = -math.copysign(levels[i][1], v[i])
             released = {}
+            held_at = {}       # joint -> the stop (0 or L) it reaches within this substep: held there
             while True:
-                free = [i for i in range(4) if i not in rest]
-                a = np.zeros(4)
-                b = rhs + fric
-                if free:
-                    a[free] = np.linalg.solve(Meff[np.ix_(free, free)], b[free])
-                if not rest:
-                    break
-                need = Meff[rest] @ a - b[rest]            # the force each resting joint needs to stay
-                worst, wi = 0.0, None
-                for r_i, f_need in zip(rest, need):
-                    Fs = levels[r_i][0]
-                    lo, hi = -Fs, Fs
-                    if x[r_i] <= 0.0:
-                        hi = math.inf                    # the stop pushes outwards without limit
-                    if x[r_i] >= acts[r_i].L:
-                        lo = -math.inf
-                    over = max(lo - f_need, f_need - hi, 0.0)
-                    if over > worst:
-                        worst, wi = over, r_i
-                if wi is None:
-                    break
-                f_need = need[rest.index(wi)]
-                d = -math.copysign(1.0, f_need)           # the way it breaks away
-                released[wi] = d
-                fric[wi] = -d * levels[wi][1]
-                rest.remove(wi)
-            v_new = v + h * a
-            for i in range(4):
-                if i in rest:
-                    v_new[i] = 0.0
-                elif i in released:
-                    if v_new[i] * released[i] <= 0.0:
+                while True:
+                    free = [i for i in range(4) if i not in rest]
+                    a = np.zeros(4)
+                    held = list(held_at)
+                    for i in held:                   # brought to rest within the substep by its stop
+                        a[i] = -v[i] / h
+                    b = rhs + fric
+                    if free:
+                        a[free] = np.linalg.solve(Meff[np.ix_(free, free)],
+                                                  b[free] - Meff[np.ix_(free, held)] @ a[held] if held else b[free])
+                    if not rest:
+                        break
+                    need = Meff[rest] @ a - b[rest]            # the force each resting joint needs to stay
+                    worst, wi = 0.0, None
+                    for r_i, f_need in zip(rest, need):
+                        if r_i in held_at:
+                            continue                             # on its stop in this substep: the stop holds it
+                        Fs = levels[r_i][0]
+                        lo, hi = -Fs, Fs
+                        if x[r_i] <= 0.0:
+                            hi = math.inf                    # the stop pushes outwards without limit
+                        if x[r_i] >= acts[r_i].L:
+                            lo = -math.inf
+                        over = max(lo - f_need, f_need - hi, 0.0)
+                        if over > worst:
+                            worst, wi = over, r_i
+                    if wi is None:
+                        break
+                    f_need = need[rest.index(wi)]
+                    d = -math.copysign(1.0, f_need)           # the way it breaks away
+                    released[wi] = d
+                    fric[wi] = -d * levels[wi][1]
+                    rest.remove(wi)
+                v_new = v + h * a
+                for i in range(4):
+                    if i in rest:
                         v_new[i] = 0.0
-                elif v[i] != 0.0 and v_new[i] * v[i] <= 0.0:
-                    v_new[i] = 0.0                         # the velocity's sign change: it sticks
+                    elif i in released:
+                        if v_new[i] * released[i] <= 0.0:
+                            v_new[i] = 0.0
+                    elif v[i] != 0.0 and v_new[i] * v[i] <= 0.0:
+                        v_new[i] = 0.0                         # the velocity's sign change: it sticks
+                # a joint that reaches its stop within the substep is held there, and the
+                # substep solved again with it held: its stop's reaction (a plastic impact)
+                # reaches the other joints through the mass matrix, as the stop's force would
+                hits = {}
+                for i, ac in enumerate(acts):
+                    if i not in rest:
+                        xn = x[i] + h * v_new[i]
+                        if xn < 0.0 or xn > ac.L:
+                            hits[i] = 0.0 if xn < 0.0 else ac.L
+                if not hits:
+                    break
+                for i, target in hits.items():
+                    held_at[i] = target
+                    rest.append(i)
+                    fric[i] = 0.0
+                    released.pop(i, None)
             x_new = x + h * v_new
+            for i, target in held_at.items():
+                x_new[i] = target
             for i, ac in enumerate(acts):
                 if x_new[i] <= 0.0:
                     x_new[i] = 0.0
