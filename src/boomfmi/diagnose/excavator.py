@@ -213,6 +213,7 @@ class CutFinding:
     verdict: list = field(default_factory=list)      #: effect names, or ["unexplained"]
     values: dict | None = None   #: the load cut's joint load identified on the fit cuts
     own_gaps: list | None = None  #: the load cut's gaps with the load identified on each holdout itself
+    spreads: list | None = None   #: what the load's static friction interval moves the load cut, per holdout
 
     @property
     def thresholds(self) -> list:
@@ -467,6 +468,16 @@ def _own_load(f: JointFinding, jl, hold_cuts, notes: list) -> None:
                      f"identified on the holdout itself ({e}); not a finding")
         return
     lc.own_gaps = own
+    # what the load's own uncertainty (F_s's 95 % interval from the fit recordings' starts)
+    # moves the cut's position by: a gap within the threshold plus that is no finding
+    lc.spreads = [jl.load_spread(c, lc.values, {}) for c in hold_cuts]
+    if all(g <= h + s for g, h, s in zip(lc.gaps, lc.thresholds, lc.spreads)):
+        lc.verdict = []
+        notes.append(f"{f.joint}: the load cut's gap ({100 * lc.gap:.2f} %) is within what the uncertainty of the "
+                     f"{f.joint}'s static friction moves it ({100 * float(np.mean(lc.spreads)):.2f} % beyond the "
+                     f"noise's threshold): the fit recordings do not pin its starts closely enough to tell; "
+                     f"not a finding")
+        return
     if all(g <= h for g, h in zip(own, lc.thresholds)):
         lc.verdict = []
         notes.append(f"{f.joint}: the load cut's gap ({100 * lc.gap:.2f} %) is within what the joint's load "

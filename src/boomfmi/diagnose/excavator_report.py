@@ -138,7 +138,8 @@ def diagnose_excavator_recordings(fit_paths, hold_paths, out_dir, progress=None)
                 entry["position"] = {"gap": lc.gaps[k], "noise_floor": lc.noises[k], "threshold": lc.thresholds[k],
                                      "flagged": lc.gaps[k] > lc.thresholds[k], "subsystem": f"linkage ({j})",
                                      "finding": ", ".join(lc.verdict) or None,
-                                     "gap_own_load": lc.own_gaps[k] if lc.own_gaps else None}
+                                     "gap_own_load": lc.own_gaps[k] if lc.own_gaps else None,
+                                     "spread_of_the_load": lc.spreads[k] if lc.spreads else None}
             where.append(entry)
         figures.append((str(h.path), _figure(h, curves)))
     for j, f in found.joints.items():

@@ -51,7 +51,8 @@ import numpy as np
 
 from .. import physics as ph
 from ..compare import as_sensed
-from ..identify.excavator import EE_CUTOFF, JOINTS, JointData, _equivalent, equation_error as machine_equation_error
+from ..identify.excavator import EE_CUTOFF, JOINTS, JointData, _equivalent, _honest_static
+from ..identify.excavator import equation_error as machine_equation_error
 from ..identify.excavator import equation_rows as machine_equation_rows, prepare_excavator
 from ..identify.excavator_outputs import machine_for
 from ..identify.fit import PRESSURE_COEFFICIENT, Motion, motion, runs, static_friction
@@ -157,6 +158,44 @@ def _episodes(jd: JointData) -> list:
     return out
 
 
+#: [m] a joint within this of an end of its stroke is on its stop
+AT_STOP = 5e-4
+
+
+def _impacts(data: list, i: int) -> list:
+    """Where another joint than the ``i``-th comes to rest on an end stop (a plastic
+    impact): the sample its rest begins.  The stop's reaction reaches this joint through
+    the linkage's inertia as an impulse, which the load cut knows only through the other
+    joint's filtered acceleration (spread over some 1/CUTOFF, across which this joint's
+    friction may stick or turn): the cut cannot follow this joint through it."""
+    out = []
+    for o, jd in enumerate(data):
+        if o == i:
+            continue
+        x = jd.p.x
+        for i0, _ in runs(~jd.modes.sliding):
+            if i0 > 0 and (x[i0] <= AT_STOP or x[i0] >= jd.L - AT_STOP):
+                out.append(i0)
+    return sorted(out)
+
+
+def _split_at_impacts(episodes: list, jd: JointData, impacts: list) -> list:
+    """The episodes restarted where another joint's impact has passed (two periods of the
+    filter's cut-off after it, ``jd.p.cutoff``), at the measured position and speed
+    (smoothed, as a recording that starts in motion), so that an impact the cut cannot
+    follow costs it one motion's error, not the rest of the run."""
+    settle = int(round(2.0 * jd.p.fs / jd.p.cutoff))
+    restarts = sorted({k + settle for k in impacts if k + settle < len(jd.p.t)})
+    out = []
+    for i0, i1, x0, v0 in episodes:
+        inner = [r for r in restarts if i0 < r < i1]
+        starts = [(i0, x0, v0)] + [(r, float(np.clip(jd.modes.x[r], 0.0, jd.L)), float(jd.modes.v[r]))
+                                   for r in inner]
+        ends = [r for r in inner] + [i1]
+        out += [(a, b, x, v) for (a, x, v), b in zip(starts, ends)]
+    return out
+
+
 def load_cut(rec, joint: str, ex: exc.Excavator | None = None) -> LoadCut:
     """The load cut of ``joint`` on one excavator recording (a ``recording.Recording`` or
     a DataFrame in the excavator's format, pressures gauge); ``ex`` the machine (default
@@ -177,7 +216,8 @@ def load_cut(rec, joint: str, ex: exc.Excavator | None = None) -> LoadCut:
     P_atm = float(rec.P_atm) if hasattr(rec, "P_atm") else ex.P_atm
     jd = data[i]
     return LoadCut(joint, jd, data, ex, d[f"p_a_{joint}"].to_numpy(float) + P_atm,
-                   d[f"p_b_{joint}"].to_numpy(float) + P_atm, _episodes(jd),
+                   d[f"p_b_{joint}"].to_numpy(float) + P_atm,
+                   _split_at_impacts(_episodes(jd), jd, _impacts(data, i)),
                    str(getattr(rec, "path", "")))
 
 
@@ -275,6 +315,28 @@ def load_gap(cut: LoadCut, values: dict, effects: dict | None = None) -> float:
         return math.inf
     m = cut.x
     return float(np.sqrt(np.mean((m - as_sensed(m, xs)) ** 2))) / cut.span
+
+
+def load_spread(cut: LoadCut, values: dict, effects: dict | None = None) -> float:
+    """How far the load's own uncertainty moves the load cut: the NRMSE (over the cut's
+    range) between the position simulated with ``values`` and with its static friction
+    at the nearer end of its 95 % interval (``values["F_s_ci95"]``, from
+    :func:`identify_load`: the starts bound F_s and little else, and at a slow slide or a
+    start F_s decides whether the joint moves at all).  ``attribute.baseline_spread``'s
+    rule for the boom's whole model; 0 without an interval."""
+    ci = values.get("F_s_ci95")
+    if not ci:
+        return 0.0
+    F_s, F_d = float(values["F_s"]), float(values["F_d"])
+    lo, hi = float(ci[0]), float(ci[1])
+    step = min(abs(F_s - lo), abs(hi - F_s))
+    if not (math.isfinite(step) and step > 0.0):
+        return 0.0
+    moved = dict(values, F_s=max(F_s + step if abs(hi - F_s) <= abs(F_s - lo) else F_s - step, F_d))
+    a, b = simulate(cut, values, effects), simulate(cut, moved, effects)
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        return 0.0
+    return float(np.sqrt(np.mean((a - b) ** 2))) / cut.span
 
 
 # ----------------------------------------------------------------------------- identify
@@ -402,11 +464,17 @@ def identify_load(fit_cuts, effects: dict | None = None) -> dict:
     motions = [_motion(cut, payload, c, law) for cut in cuts]
     base = {"M": [cut.data.Mii0 + payload * cut.data.dMii for cut in cuts], "K_v": values["K_v"],
             "F_d": values["F_d"], "F_L": 0.0, "F_unsure": [cut.data.unsure for cut in cuts]}
-    F_s, _, _ = static_friction(motions, base, _unit(cuts[0]), cuts[0].ex.P_atm, v_s=v_s)
+    F_s, _, info = static_friction(motions, base, _unit(cuts[0]), cuts[0].ex.P_atm, v_s=v_s)
+    interval = None
     if F_s is not None:
         values["F_s"] = F_s.value
+        honest, _ = _honest_static(F_s, info or {})
+        interval = (float(honest.ci95[0]), float(honest.ci95[1]))
     values["F_s"] = float(max(values.get("F_s", values["F_d"]), values["F_d"]))
-    return {"K_v": values["K_v"], "F_s": values["F_s"], "F_d": values["F_d"], "payload": payload}
+    out = {"K_v": values["K_v"], "F_s": values["F_s"], "F_d": values["F_d"], "payload": payload}
+    if interval is not None and all(math.isfinite(b) for b in interval):
+        out["F_s_ci95"] = interval
+    return out
 
 
 def _check_motion(cuts) -> None:
@@ -483,7 +551,10 @@ def refine_load(cuts, values: dict, effects: dict) -> tuple[dict, float]:
 
     def at(z):
         K_v, F_d = values["K_v"] * 10 ** z[0], values["F_d"] * 10 ** z[1]
-        return dict(values, K_v=K_v, F_d=F_d, F_s=max(values["F_s"] * 10 ** z[2], F_d))
+        out = dict(values, K_v=K_v, F_d=F_d, F_s=max(values["F_s"] * 10 ** z[2], F_d))
+        if values.get("F_s_ci95"):       # its interval moves with it (the same relative width)
+            out["F_s_ci95"] = tuple(float(b) * 10 ** z[2] for b in values["F_s_ci95"])
+        return out
 
     def cost(z):
         return float(np.mean([load_gap(c, at(z), effects) for c in cuts]))
@@ -494,8 +565,9 @@ def refine_load(cuts, values: dict, effects: dict) -> tuple[dict, float]:
     c0 = cost(z0)
     if not (res.fun < c0):
         return dict(values), c0
-    return {k: float(v) for k, v in at(res.x).items()}, float(res.fun)
+    return {k: (float(v) if k != "F_s_ci95" else v) for k, v in at(res.x).items()}, float(res.fun)
 
 
-__all__ = ["refine_load", "LoadCut", "load_cut", "load_noise", "load_gap", "identify_load", "fit_load_effect", "simulate",
+__all__ = ["refine_load", "LoadCut", "load_cut", "load_noise", "load_gap", "load_spread", "identify_load",
+           "fit_load_effect", "simulate",
            "X_SPAN_MIN", "REST"]
