@@ -38,7 +38,8 @@ def main(argv=None) -> int:
     parser.add_argument("--write-references", action="store_true",
                         help="also rewrite fmus/<name>/<name>_in.csv and _ref.csv from the built FMUs (a file "
                              "unchanged but for floating-point noise is kept), and, with every FMU built, "
-                             "ssp/reference_rig.ssv and docs/interfaces.md")
+                             "ssp/reference_rig.ssv and docs/interfaces.md; with valve, cylinder or linkage built, "
+                             "ssp/excavator.ssv")
     parser.add_argument("--portable", action="store_true",
                         help="put numpy (for linux64 and win64) inside each FMU, so that a host needs only a "
                              "CPython of this build's version (about 20 MB more per FMU); default: lean FMUs "
@@ -60,17 +61,23 @@ def main(argv=None) -> int:
                 from boomfmi.fmubuild.references import INPUTS, write_references
                 if name in INPUTS:      # the bridge's behaviour depends on its rig or recording
                     print(f"wrote {write_references(HERE / 'fmus' / name, path)}")
-        from boomfmi.fmubuild.ssp import fmus_of, osp_ssp, pack_ssp, write_reference_parameters
+        from boomfmi.fmubuild.ssp import PARAMETER_SETS, fmus_of, osp_ssp, pack_ssp, parameters_ssv
+        if args.write_references:
+            from boomfmi.model.boom import Model
+            from boomfmi.model.machine import boom_machine, excavator_machine
+            built = set(args.names)
+            # the boom's set spans two SSPs: rewritten with every FMU built; the excavator's with any of its own
+            for machine, due in ((boom_machine(Model()), built == set(FMU_NAMES)),
+                                 (excavator_machine(), bool({"valve", "cylinder", "linkage"} & built))):
+                if due:
+                    out = HERE / "ssp" / f"{PARAMETER_SETS[machine.mechanism][0]}.ssv"
+                    print(f"wrote {parameters_ssv(machine, [HERE / 'ssp' / s for s in SSPS.values()], args.out / 'fmus', out)}")
         if set(args.names) == set(FMU_NAMES) and args.write_references:
-            print(f"wrote {write_reference_parameters([HERE / 'ssp' / ssd for ssd in SSPS.values()], args.out / 'fmus', HERE / 'ssp' / 'reference_rig.ssv')}")
             from boomfmi.describe import INTERFACES_DOC, interfaces_document
             doc, text = HERE / INTERFACES_DOC, interfaces_document([args.out / "fmus" / f"{n}.fmu" for n in FMU_NAMES])
             if not doc.is_file() or doc.read_text() != text:
                 doc.write_text(text)
             print(f"wrote {doc}")
-        if args.write_references and {"valve", "cylinder", "linkage"} & set(args.names):
-            from boomfmi.fmubuild.excavator import excavator_parameters_ssv
-            print(f"wrote {excavator_parameters_ssv(HERE / 'ssp' / 'excavator.ssd', args.out / 'fmus', HERE / 'ssp' / 'excavator.ssv')}")
         for name, ssd in SSPS.items():
             # an SSP carries copies of its FMUs: re-pack every one that holds a rebuilt FMU
             fmus = fmus_of(HERE / "ssp" / ssd)

@@ -5,7 +5,7 @@ digging cycle.
 Runs build/excavator.ssp (four valves, four cylinders, the linkage) through boomfmi's
 master at 1 ms (Gauss-Seidel and Jacobi; --steps for others) and prints the NRMSE (RMS
 error over the reference's range) of every joint's piston position x and chamber
-pressures p_a, p_b against ``model.excavator_reference`` (the same physics as one
+pressures p_a, p_b against ``model.reference.simulate_linkage`` (the same physics as one
 system, 50 us steps, every coupling tight).  The reference's own error is gauged by
 halving its step (--check-reference; a 25 us run beside the 50 us one).  With --out,
 appends the tables to docs/cosim-accuracy.md under "## The whole excavator" (replacing
@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from boomfmi.experiments import digging_cycle  # noqa: E402
-from boomfmi.model.excavator_reference import simulate_excavator_reference  # noqa: E402
+from boomfmi.model.reference import simulate_excavator_reference  # noqa: E402
 from boomfmi.physics.excavator import JOINTS  # noqa: E402
 from boomfmi.system import simulate_ssp  # noqa: E402
 
@@ -82,7 +82,7 @@ def main(argv=None) -> int:
     print(f"reference: fixed 50 us steps, {stop:g} s in {time.perf_counter() - t:.1f} s wall")
     lines = [SECTION, "",
              "`build/excavator.ssp` (four `valve`, four `cylinder`, one `linkage`) against the monolithic",
-             "reference `boomfmi.model.excavator_reference` (the same physics functions as one system,",
+             "reference `boomfmi.model.reference.simulate_linkage` (the same physics functions as one system,",
              "fixed 50 us steps, valves, chambers and linkage coupled every step), over the digging cycle",
              f"(`digging_cycle`, {stop:g} s), NRMSE of every joint's x, p_a, p_b.  Made by",
              "`python benchmarks/excavator_cosim.py --check-reference --out docs/cosim-accuracy.md` on "

@@ -32,9 +32,9 @@ import numpy as np
 
 from boomfmi import experiments as E
 from boomfmi.identify.excavator import identify_excavator, true_values
-from boomfmi.physics.excavator_force import estimate_tip_force, tip_force_figures
+from boomfmi.physics.force_estimation import estimate_tip_force, tip_force_figures
 from boomfmi.rig.config import NOISE
-from boomfmi.rig.excavator import run_excavator_offline
+from boomfmi.rig import run_excavator_offline
 
 PAYLOAD = 0.5
 SENSORS = {

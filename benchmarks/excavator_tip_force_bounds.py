@@ -33,7 +33,7 @@ from scipy.optimize import linprog
 
 from boomfmi import experiments as E
 from boomfmi.physics import excavator as exc
-from boomfmi.rig.excavator import run_excavator_offline
+from boomfmi.rig import run_excavator_offline
 
 EXACT = {"p_sigma": 0.0, "alpha_sigma": 0.0, "quantise": False}
 SCENARIOS = tuple(E.TIP_FORCE_SCENARIOS)

@@ -15,7 +15,7 @@ import pytest
 from boomfmi import experiments as E
 from boomfmi.identify.excavator import JOINTS, true_values
 from boomfmi.recording import write_recording
-from boomfmi.rig.excavator import run_excavator_offline
+from boomfmi.rig import run_excavator_offline
 from boomfmi.system.ssv import read_ssv
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -8,8 +8,8 @@ import pytest
 
 from boomfmi import experiments as E
 from boomfmi.identify.excavator import equation_error, identify_excavator, prepare_excavator, true_values
-from boomfmi.physics.excavator_force import estimate_tip_force
-from boomfmi.rig.excavator import run_excavator_offline
+from boomfmi.physics.force_estimation import estimate_tip_force
+from boomfmi.rig import run_excavator_offline
 
 PAYLOAD = 0.5
 
@@ -132,7 +132,7 @@ def _observer(d):
     least-squares estimate, and per sample the informative joints' estimate (nan where
     undetermined), their number and the determined components (finite ``state["f_known"]``)."""
     from boomfmi.physics.excavator import JOINTS, Excavator
-    from boomfmi.physics.excavator_force import F_MOTION, F_MOTION_SWING, observer_start, observer_step
+    from boomfmi.physics.force_estimation import F_MOTION, F_MOTION_SWING, observer_start, observer_step
     P = Excavator().P_atm
     Q = d[[f"angle_{j}" for j in JOINTS]].to_numpy()
     PA = d[[f"p_a_{j}" for j in JOINTS]].to_numpy() + P
@@ -195,7 +195,7 @@ def test_tip_force_silent_while_the_angle_sensors_toggle_at_rest():
     second squared (at the swing's crank, hundreds of newtons); the observer counts a
     joint that is not sliding by both filters as at rest, with no acceleration."""
     from boomfmi.physics.excavator import JOINTS, Excavator, joint_angles
-    from boomfmi.rig.excavator import holding_pressures
+    from boomfmi.rig import holding_pressures
     ex = Excavator()
     x = 0.5 * np.asarray(ex.strokes)
     p_a, p_b = holding_pressures(x, ex)

@@ -20,7 +20,7 @@ from boomfmi.physics.excavator import Excavator, joint_angles, lever_arms, tip_j
 from boomfmi.recording import read_recording, recording_kind
 from boomfmi.rig import config_machine, make_rig
 from boomfmi.rig.config import load_excavator_config
-from boomfmi.rig.excavator import ExcavatorRig, run_excavator_offline
+from boomfmi.rig import ExcavatorRig, run_excavator_offline
 from boomfmi.rig.offline import run_offline
 
 ROOT = Path(__file__).resolve().parents[1]

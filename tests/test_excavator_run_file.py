@@ -16,9 +16,9 @@ import pytest
 from boomfmi import experiments as E
 from boomfmi.cli import main
 from boomfmi.identify.excavator import JOINTS, true_values
-from boomfmi.physics.excavator_force import F_BOUND
+from boomfmi.physics.force_estimation import F_BOUND
 from boomfmi.recording import read_recording, write_recording
-from boomfmi.rig.excavator import run_excavator_offline
+from boomfmi.rig import run_excavator_offline
 from boomfmi.view.frames import load_run
 
 ROOT = Path(__file__).resolve().parents[1]

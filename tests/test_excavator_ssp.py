@@ -42,14 +42,15 @@ def dig_inputs(t: float) -> dict:
 
 
 def test_parameter_set_is_the_physics(tmp_path, excavator_ssp):
-    """ssp/excavator.ssv is what fmubuild.excavator writes from physics.excavator."""
-    from boomfmi.fmubuild.excavator import excavator_parameters_ssv
+    """ssp/excavator.ssv is what fmubuild.ssp.parameters_ssv writes for the excavator machine."""
+    from boomfmi.fmubuild.ssp import parameters_ssv
+    from boomfmi.model.machine import excavator_machine
     fmus = tmp_path / "fmus"
     fmus.mkdir()
     with zipfile.ZipFile(excavator_ssp) as z:
         for name in ("valve", "cylinder", "linkage"):
             (fmus / f"{name}.fmu").write_bytes(z.read(f"resources/{name}.fmu"))
-    fresh = read_ssv(excavator_parameters_ssv(ROOT / "ssp" / "excavator.ssd", fmus, tmp_path / "e.ssv").read_bytes(), "fresh")
+    fresh = read_ssv(parameters_ssv(excavator_machine(), ROOT / "ssp" / "excavator.ssd", fmus, tmp_path / "e.ssv").read_bytes(), "fresh")
     shipped = read_ssv((ROOT / "ssp" / "excavator.ssv").read_bytes(), "ssp/excavator.ssv")
     assert set(fresh) == set(shipped)
     for name, p in fresh.items():
@@ -141,7 +142,7 @@ def test_fast_linkage_terms_equal_the_array_functions():
 
 
 def test_holding_pressures_hold_the_machine():
-    from boomfmi.model.excavator_reference import ExcavatorMachine
+    from boomfmi.model.machine import ExcavatorMachine
     m = ExcavatorMachine()
     x0, p_a, p_b = m.start()
     acc = exc.piston_accelerations(x0, np.zeros(4), exc.cylinder_forces(p_a, p_b, m.ex), ex=m.ex)
@@ -255,7 +256,7 @@ def test_cosimulation_within_one_percent_of_the_monolithic_reference(excavator_s
     within 1 % NRMSE of the monolithic reference (benchmarks/excavator_cosim.py prints the
     figures)."""
     from boomfmi.experiments import digging_cycle
-    from boomfmi.model.excavator_reference import simulate_excavator_reference
+    from boomfmi.model.reference import simulate_excavator_reference
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from excavator_cosim import nrmse_table
     prof = digging_cycle()

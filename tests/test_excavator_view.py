@@ -141,7 +141,7 @@ def test_a_run_missing_one_machine_column_is_named(runs, tmp_path):
 # -- export -----------------------------------------------------------------------------------
 def test_export_renders_an_excavator_recording_to_gif(tmp_path):
     from PIL import Image
-    from boomfmi.rig.excavator import run_excavator_offline
+    from boomfmi.rig import run_excavator_offline
     rec = write_recording(tmp_path / "dig.csv", run_excavator_offline({"machine": "excavator"}, digging_cycle(), 1.0))
     gif = tmp_path / "dig.gif"
     out = subprocess.run([sys.executable, "-m", "boomfmi.cli", "view", "--replay", str(rec), "--export", str(gif),

@@ -143,7 +143,9 @@ def test_an_fmu_whose_model_identifier_is_a_path_is_refused(fmu, tmp_path):
 
 def test_packing_refuses_a_source_outside_the_fmu_folder(fmu_dir, tmp_path):
     from boomfmi.fmubuild import BuildError
-    from boomfmi.fmubuild.ssp import pack_ssp, write_reference_parameters
+    from boomfmi.fmubuild.ssp import pack_ssp, parameters_ssv
+    from boomfmi.model.boom import Model
+    from boomfmi.model.machine import boom_machine
     (tmp_path / "secret.fmu").write_bytes(PRECIOUS)
     fmus = tmp_path / "build" / "fmus"           # fmus / "../../secret.fmu" is the secret
     fmus.mkdir(parents=True)
@@ -157,7 +159,7 @@ def test_packing_refuses_a_source_outside_the_fmu_folder(fmu_dir, tmp_path):
         pack_ssp(ssd, fmus, tmp_path / "out.ssp")
     assert not (tmp_path / "out.ssp").exists() and not (tmp_path / "out.tmp").exists()
     with pytest.raises(BuildError, match=r"component 'valve': source .* it climbs out"):
-        write_reference_parameters([ssd], fmus, tmp_path / "ref.ssv")
+        parameters_ssv(boom_machine(Model()), [ssd], fmus, tmp_path / "ref.ssv")
     assert not (tmp_path / "ref.ssv").exists()
     assert (tmp_path / "secret.fmu").read_bytes() == PRECIOUS
 

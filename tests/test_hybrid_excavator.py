@@ -30,7 +30,7 @@ def _nrmse(a, b) -> float:
 
 
 def test_effect_free_digging_cycle_moves_as_the_virtual_rig():
-    from boomfmi.rig.excavator import run_excavator_offline
+    from boomfmi.rig import run_excavator_offline
     prof = digging_cycle()
     mine = hx.simulate(hx.Machine(sensors=hx.IDEAL_SENSORS), prof, prof.duration)
     rig = run_excavator_offline({"machine": "excavator",

@@ -14,7 +14,7 @@ from boomfmi import experiments as E
 from boomfmi.identify.excavator import JOINTS, PROMISE, _honest_static, identify_excavator, true_values
 from boomfmi.identify.excavator_outputs import cannot_tell
 from boomfmi.identify.fit import Estimate
-from boomfmi.rig.excavator import run_excavator_offline
+from boomfmi.rig import run_excavator_offline
 
 PAYLOAD = 0.5
 

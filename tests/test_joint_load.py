@@ -14,7 +14,7 @@ from boomfmi.diagnose import joint_load as jl
 from boomfmi.identify.preprocess import ABS_FLOOR, NOISE_FACTOR
 from boomfmi.model import EFFECTS
 from boomfmi.physics.excavator import JOINTS, Excavator
-from boomfmi.rig.excavator import run_excavator_offline
+from boomfmi.rig import run_excavator_offline
 
 EXCITATION = 8.0      # s of excavator_excitation: every joint moves in it
 DIG = 5.5             # s of the digging cycle: every joint has moved by the bucket's curl

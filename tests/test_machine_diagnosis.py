@@ -1,7 +1,7 @@
 """Diagnosis of the whole excavator (issue 32, item 2): every effect of the catalogue on any
 joint, fitted on the fit recordings and scored on the holdouts, pairs across joints,
 friction through each joint's load cut; on the four-joint virtual rig
-(``rig.excavator.run_excavator_offline``), through ``diagnose_excavator_recordings``
+(``rig.run_excavator_offline``), through ``diagnose_excavator_recordings``
 (the command's entry point)."""
 import json
 import math
@@ -14,7 +14,7 @@ from boomfmi.diagnose.excavator import (PNEUMATIC_STAGES, candidates, diagnose_e
                                         joint_pressures, unlagged)
 from boomfmi.diagnose.excavator_report import diagnose_excavator_recordings
 from boomfmi.recording import write_recording
-from boomfmi.rig.excavator import run_excavator_offline
+from boomfmi.rig import run_excavator_offline
 
 
 def _recording(frame, path):
@@ -120,7 +120,8 @@ def test_an_effect_free_machine_gives_no_finding():
 def test_a_pair_across_joints_is_named(tmp_path):
     """piston_leakage on the arm and valve_deadband on the bucket: both named, each on its
     joint (the fit and holdout: two draws of excavator_excitation, whose small openings
-    show the deadband)."""
+    show the deadband), the leak's area the rig's; the joints without an effect not
+    flagged.  (This is also the test of a leak on the arm named with its joint.)"""
     joints = {"arm": {"effects": {"piston_leakage": {"A_leak": 3e-8}}},
               "bucket": {"effects": {"valve_deadband": {"overlap": 0.4}}}}
     found = diagnose_excavator(*_runs(joints, 6.0, E.excavator_excitation(seed=2, duration=6.0), 6.0))
@@ -132,6 +133,8 @@ def test_a_pair_across_joints_is_named(tmp_path):
         assert best.shrink == pytest.approx(1.0 - sum(best.hold_gaps) / sum(cut.gaps))
     assert found.joints["arm"].candidates[0].params["piston_leakage"]["A"] == pytest.approx(3e-8, rel=0.2)
     assert found.joints["bucket"].candidates[0].params["valve_deadband"]["width"] == pytest.approx(0.4, rel=0.25)
+    for j in ("swing", "boom"):
+        assert not found.joints[j].flagged, found.joints[j]
 
 
 @pytest.mark.slow

@@ -14,8 +14,8 @@ import pytest
 from boomfmi import experiments as E
 from boomfmi import physics as ph
 from boomfmi.model import Boom, Model, measure
-from boomfmi.model.excavator_reference import (ExcavatorMachine, friction_hook, joint_fmu_variable,
-                                               simulate_excavator_reference)
+from boomfmi.model.machine import ExcavatorMachine, friction_hook, joint_fmu_variable
+from boomfmi.model.reference import simulate_excavator_reference
 from boomfmi.physics.excavator import JOINTS, Excavator, advance_linkage, pistons_from_angles
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -237,7 +237,7 @@ def test_confirm_machine_shrinks_the_arms_leak_through_the_ssp(tmp_path):
     from boomfmi.identify.excavator import true_values
     from boomfmi.paths import built
     from boomfmi.recording import read_recording
-    from boomfmi.rig.excavator import run_excavator_offline
+    from boomfmi.rig import run_excavator_offline
     if not built("excavator.ssp").is_file():
         pytest.skip("build/excavator.ssp is not built (python build_fmus.py)")
     cfg = json.loads((EXAMPLES / "excavator_arm_leakage.json").read_text())
@@ -305,7 +305,7 @@ def test_a_campaign_runs_an_excavator_case_on_a_local_cluster(tmp_path):
     from boomfmi.campaign import run_campaign
     from boomfmi.campaign.manifest import write_manifest
     from boomfmi.identify.excavator import true_values
-    from boomfmi.rig.excavator import run_excavator_offline
+    from boomfmi.rig import run_excavator_offline
     cfg = json.loads((EXAMPLES / "excavator_none.json").read_text())
     fit = _recording(run_excavator_offline(cfg, E.excavator_excitation(seed=1, duration=4.0), 4.0),
                      tmp_path / "fit.csv")

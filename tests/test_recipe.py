@@ -65,10 +65,12 @@ def test_the_writer_keeps_a_reference_that_differs_by_noise_and_rewrites_a_real_
 def test_the_committed_parameter_set_is_what_the_fmus_declare(tmp_path, fmu_dir):
     """``ssp/reference_rig.ssv`` is byte for byte what ``--write-references`` writes: every
     parameter of every bound component (``cylinder.n_poly`` and ``V_cushion_port`` included)."""
-    from boomfmi.fmubuild.ssp import write_reference_parameters
+    from boomfmi.fmubuild.ssp import parameters_ssv
+    from boomfmi.model.boom import Model
+    from boomfmi.model.machine import boom_machine
     build_fmus = _build_fmus()
-    fresh = write_reference_parameters([ROOT / "ssp" / ssd for ssd in build_fmus.SSPS.values()], fmu_dir,
-                                       tmp_path / "reference_rig.ssv").read_text()
+    fresh = parameters_ssv(boom_machine(Model()), [ROOT / "ssp" / ssd for ssd in build_fmus.SSPS.values()], fmu_dir,
+                           tmp_path / "reference_rig.ssv").read_text()
     committed = (ROOT / "ssp" / "reference_rig.ssv").read_text()
     for name in ("cylinder.n_poly", "cylinder.V_cushion_port"):
         assert f'name="{name}"' in committed, f"ssp/reference_rig.ssv lacks {name}: {REWRITE}"

@@ -10,9 +10,9 @@ import pytest
 
 from boomfmi import experiments as E
 from boomfmi.physics import excavator as exc
-from boomfmi.physics.excavator_force import (F_BOUND, estimate_tip_force, joint_force_bands, tip_force_figures,
-                                             tip_force_interval)
-from boomfmi.rig.excavator import run_excavator_offline
+from boomfmi.physics.force_estimation import (F_BOUND, estimate_tip_force, joint_force_bands, tip_force_figures,
+                                              tip_force_interval)
+from boomfmi.rig import run_excavator_offline
 
 AXES = ("f_tip_x", "f_tip_y", "f_tip_z")
 

@@ -5,7 +5,7 @@ Per-joint load observers (each cylinder's equation of motion through the four-jo
 linkage, read backwards from the measured pressures and angles with the identified
 friction per cylinder and the payload) combined into the tip force by least squares over
 the Jacobian transpose (four joints, three unknowns); ``residual`` is the misfit of the
-four equations [N m].  ``physics/excavator_force.py`` holds the physics.  The measured
+four equations [N m].  ``physics/force_estimation.py`` holds the physics.  The measured
 angles pass a critically damped second-order filter (``f_motion``; the swing's
 ``f_motion_swing``), the pneumatic forces the same filter; the estimate then a
 first-order low-pass (``tau_est``).  ``f_reflect_*``, the joystick's 3-axis force
@@ -44,9 +44,9 @@ import numpy as np
 from boomfmi_excavator_force_estimator_lib.fmislave import BoomSlave, input, output, parameter
 from boomfmi_excavator_force_estimator_lib.physics import reference_rig
 from boomfmi_excavator_force_estimator_lib.physics.excavator import JOINTS, Excavator, check_excavator
-from boomfmi_excavator_force_estimator_lib.physics.excavator_force import (BAND_RATE, BAND_SLIDE, F_BOUND, F_MOTION,
-                                                                           F_MOTION_SWING, T_HOLD, observer_start,
-                                                                           observer_step, reflected_force_3d)
+from boomfmi_excavator_force_estimator_lib.physics.force_estimation import (BAND_RATE, BAND_SLIDE, F_BOUND, F_MOTION,
+                                                                            F_MOTION_SWING, T_HOLD, observer_start,
+                                                                            observer_step, reflected_force)
 from boomfmi_excavator_force_estimator_lib.physics.validation import require_non_negative, require_positive
 
 _EX = Excavator()
@@ -159,7 +159,7 @@ class ExcavatorForceEstimator(BoomSlave):
         if self._state is None:             # the filters start at rest at the first measurement
             self._state = observer_start(q, p_a, p_b, self._ex)
         self._state, self._f, self._res, _ = self._observe(self._state, q, p_a, p_b, dt)
-        self._r = reflected_force_3d(self._f, self._r, dt, self.gain, self.f_max, self.rate_max)
+        self._r = reflected_force(self._f, self._r, dt, self.gain, self.f_max, self.rate_max)   # per axis
         known = self._state["f_known"]
         self._f_det = np.where(np.isfinite(known), known, self._f_det)     # held where undetermined
         self._lo, self._hi = self._state["f_lo"], self._state["f_hi"]

@@ -27,7 +27,7 @@ from boomfmi_force_estimator_lib.fmislave import (CYLINDER, GEOMETRY, L_MAX, LOA
 from boomfmi_force_estimator_lib.physics import (Cylinder, Gas, Geometry, Load, ParameterError, below_sensor_floor,
                                                  check_cylinder, check_gas, check_geometry, check_load,
                                                  measured_drive_force, motion_filter_step, first_order_step,
-                                                 observed_external_force, pneumatic_stiffness,
+                                                 observed_external_force, observer_filter_step, pneumatic_stiffness,
                                                  position_error_force, reflected_force)
 from boomfmi_force_estimator_lib.physics import reference_rig
 from boomfmi_force_estimator_lib.physics.validation import require_non_negative, require_positive
@@ -86,21 +86,22 @@ class ForceEstimator(BoomSlave):
         self._started = False
 
     def step(self, t, dt):
-        if not self._started:               # the filters start at rest at the first measurement
-            self._x_f, self._v_f = self.x_measured, 0.0
-        self._x_f, self._v_f, self.v_measured, a = motion_filter_step(self._x_f, self._v_f, self.x_measured,
-                                                                      dt, self._omega)
         if self.method == "observer":
             p_a = below_sensor_floor(self.p_a_measured, self.p_a_model - self.P_atm, self.p_floor) + self.P_atm
             p_b = below_sensor_floor(self.p_b_measured, self.p_b_model - self.P_atm, self.p_floor) + self.P_atm
             drive = measured_drive_force(p_a, p_b, self.x_measured, self._cyl, self._geom, self._load, self.P_atm)
-            if not self._started:
-                self._d_f, self._dd_f = drive, 0.0
-            d_0 = self._d_f                 # the known forces through the same filter: same delay
-            self._d_f, self._dd_f, _, _ = motion_filter_step(self._d_f, self._dd_f, drive, dt, self._omega)
-            force = observed_external_force(0.5 * (d_0 + self._d_f), self.x_measured, self.v_measured, a,
+            if not self._started:           # the filters start at rest at the first measurement
+                self._x_f, self._v_f, self._d_f, self._dd_f = self.x_measured, 0.0, drive, 0.0
+            (self._x_f, self._v_f, self.v_measured, a, self._d_f, self._dd_f,
+             d_mid) = observer_filter_step(self._x_f, self._v_f, self._d_f, self._dd_f, self.x_measured, drive, dt,
+                                           self._omega)
+            force = observed_external_force(d_mid, self.x_measured, self.v_measured, a,
                                             self._cyl, self._geom, self._load, self.v_rest)
         else:
+            if not self._started:
+                self._x_f, self._v_f = self.x_measured, 0.0
+            self._x_f, self._v_f, self.v_measured, _ = motion_filter_step(self._x_f, self._v_f, self.x_measured,
+                                                                          dt, self._omega)
             x_m = min(max(self.x_model, 0.0), self.L)
             K = self.K_p or pneumatic_stiffness(self.p_a_model, self.p_b_model, x_m, self._cyl, self._gas)
             force = position_error_force(self.x_model, self.x_measured, self.v_model, self.v_measured, K, self.D)

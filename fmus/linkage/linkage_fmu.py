@@ -13,14 +13,14 @@ motion is integrated in short substeps (``advance_linkage``).
 Each cylinder's friction carries the catalogue's friction effects as options of its own
 (``v_s_<joint>``, ``c_friction_sum_<joint>``, ...: the boom_load FMU's options with the
 joint's suffix, ``fmislave.effect_options``), applied through a :class:`Boom` of that
-joint (``model.excavator_reference.friction_hook``), so that any friction effect runs on
+joint (``model.machine.friction_hook``), so that any friction effect runs on
 any joint.
 """
 import math
 
 from boomfmi_linkage_lib.fmislave import L_MAX, BoomSlave, effect_options, input, option_values, output, parameter
 from boomfmi_linkage_lib.model import Boom, Model, effects_from_options
-from boomfmi_linkage_lib.model.excavator_reference import friction_hook
+from boomfmi_linkage_lib.model.machine import friction_hook
 from boomfmi_linkage_lib.physics import reference_rig
 from boomfmi_linkage_lib.physics.excavator import (JOINTS, LINKS, Excavator, advance_linkage, angles_and_tip,
                                                    excavator_from_values, excavator_value_names)

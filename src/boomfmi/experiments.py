@@ -490,7 +490,7 @@ class JointTrajectoryController:
     +-``i_max`` [V] (no wind-up against the ground).
 
     Call it as ``controller(t, angles)`` with the sample measured at ``t``, in time order
-    (:func:`boomfmi.rig.excavator.run_excavator_offline` does, for a profile whose
+    (:func:`boomfmi.rig.run_excavator_offline` does, for a profile whose
     ``closed_loop`` is true); called without ``angles`` (an open-loop runner: the rig
     server, the hardware bridge, an SSP's simulation) it raises ValueError rather than
     hold the valves at the centre unseen.  :meth:`reset` restarts the integrators."""
@@ -539,7 +539,7 @@ class JointTrajectoryController:
     def __call__(self, t: float, angles=None) -> dict:
         if angles is None:
             raise ValueError("a closed-loop profile needs the measured joint angles at each call, "
-                             "command(t, angles): run it with boomfmi.rig.excavator.run_excavator_offline")
+                             "command(t, angles): run it with boomfmi.rig.run_excavator_offline")
         q = np.asarray(angles, float)
         e = self.reference(t) - q
         if self._t is not None and t > self._t:

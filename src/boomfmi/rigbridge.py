@@ -29,9 +29,13 @@ imports only.
 from __future__ import annotations
 
 import bisect
+import math
 import time
 
-from .fmislave import BoomSlave, effect_options, output, parameter
+from .fmislave import GEOMETRY, U_MAX, U_MIN, BoomSlave, effect_options, input, output, parameter, rig_parameters
+from .physics import Geometry, check_geometry, reference_rig, x_from_alpha
+from .physics.excavator import JOINTS, Excavator, pistons_from_angles
+from .physics.params import L_MAX
 from .link.client import RigClient, parse_address, wait_until
 from .link.protocol import LinkError, load_key
 from .physics.effects import sensor_lag_step
@@ -71,49 +75,159 @@ def sensor_options():
     return effect_options("hardware_bridge")
 
 
+#: Each machine's bridge: its FMU, its joints, the true force it passes on.
+MACHINES = {"boom": {"model": "hardware_bridge", "joints": ("boom",), "extra": ("f_ext",)},
+            "excavator": {"model": "excavator_bridge", "joints": JOINTS, "extra": ("f_tip_x", "f_tip_y", "f_tip_z")}}
+_TIP_AXES = {"f_tip_x": "world x (ahead at swing 0)", "f_tip_y": "world y", "f_tip_z": "world z (up)"}
+_ANGLES = {"swing": "swing angle theta_swing (0 straight ahead, + counter-clockwise from above)",
+           "boom": "boom angle alpha (Eq. 12)", "arm": "arm angle theta_arm, relative to the boom",
+           "bucket": "bucket angle theta_bucket, relative to the arm"}
+_EX = Excavator()
+#: each excavator joint's angle limits: noise and quantisation may step an angle past its ends
+_LIMITS = [(a.lower_limit, a.upper) for a in _EX.actuators]
+
+
+def channel(machine: str, quantity: str, joint: str) -> str:
+    """The name of a joint's channel on a machine's bridge: the boom's alone (``p_a``,
+    ``alpha`` for the angle), an excavator's per joint (``p_a_arm``, ``angle_arm``)."""
+    if machine == "boom":
+        return "alpha" if quantity == "angle" else quantity
+    return f"{quantity}_{joint}"
+
+
+def channels(machine: str):
+    """``(MEASURED, EXTRA, COMMANDS)`` of a machine's bridge (see :class:`RigBridge`)."""
+    joints = MACHINES[machine]["joints"]
+    return (tuple(channel(machine, q, j) for q in ("p_a", "p_b", "angle") for j in joints),
+            MACHINES[machine]["extra"], tuple(channel(machine, "u", j) for j in joints))
+
+
+def bridge_variables(machine: str):
+    """The variables of a machine's bridge FMU (``"boom"``: ``hardware_bridge``,
+    ``"excavator"``: ``excavator_bridge``): the commands, each joint's measured
+    pressures and angle, x from the angle and the applied command, the true force, the
+    link's variables, the boom's geometry parameters, the sensor options."""
+    joints = MACHINES[machine]["joints"]
+    boom = machine == "boom"
+    name = lambda q, j: channel(machine, q, j)
+    of = (lambda j: "") if boom else (lambda j: f"{j} ")
+    cyl = (lambda j: "") if boom else (lambda j: f"{j} cylinder ")
+    commands = tuple(input(name("u", j), reference_rig.u_centre, "V", f"{of(j)}valve command to send to the rig",
+                           min=U_MIN, max=U_MAX) for j in joints)
+    outputs = []
+    for j in joints:
+        outputs += [output(name("p_a", j), 0.0, "Pa", f"measured {cyl(j)}chamber A pressure, gauge (as recorded)"),
+                    output(name("p_b", j), 0.0, "Pa", f"measured {cyl(j)}chamber B pressure, gauge (as recorded)")]
+        if boom:
+            outputs += [output("alpha", 0.0, "rad", "measured boom angle"),
+                        output("x", 0.0, "m", "piston position from the measured alpha by Eq. 12")]
+        else:
+            outputs += [output(name("angle", j), 0.0, "rad", f"measured {_ANGLES[j]}", min=-math.pi, max=math.pi),
+                        output(name("x", j), 0.0, "m", f"{j} piston position from the measured angle "
+                               "(excavator.md's joint map)", min=0.0, max=L_MAX)]
+        outputs.append(output(name("u_applied", j), reference_rig.u_centre, "V",
+                              f"command {'the ' + j + ' valve' if not boom else 'the valve'} got over the last step "
+                              "(5 V while the rig is in fail-safe)", min=U_MIN, max=U_MAX))
+    if boom:
+        extra = (output("f_ext", 0.0, "N", "true external force on the piston where the rig knows it (virtual rig, "
+                        "load cell), else 0"),)
+    else:
+        extra = tuple(output(f, 0.0, "N", f"true force of the environment on the bucket tip, {_TIP_AXES[f]}, where the "
+                             "rig knows it (virtual rig, load cell), else 0") for f in MACHINES[machine]["extra"])
+    return (*commands, *outputs, *extra, *link_variables("rig" if boom else "excavator's rig"),
+            *(rig_parameters(*GEOMETRY) if boom else ()), *sensor_options())
+
+
+def _hold_script_globals(cls) -> None:
+    """Take one more reference to the globals of the FMU script that defines ``cls``
+    (called as the script's class is created).
+
+    pythonfmu's ``findClass`` (run once per fmi2Instantiate) re-executes the script in
+    its module's globals, which creates the class again, and then releases that
+    dictionary once more than it took it.  A script whose functions hold its globals
+    (methods defined in it) hides this for a few instances; a bridge script declares no
+    methods (its behaviour is all here), so without this its module's globals would be
+    freed by the first instantiation and the second would crash.  The reference taken
+    here at each creation balances the release (one reference too many, held for the
+    process's life)."""
+    import ctypes
+    import sys
+    module = sys.modules.get(cls.__module__)
+    if module is not None and cls.__module__ != __name__:
+        ctypes.pythonapi.Py_IncRef(ctypes.py_object(module.__dict__))
+
+
 class RigBridge(BoomSlave):
-    """A bridge FMU's behaviour (see the module's docstring).  A subclass sets
+    """A bridge FMU's behaviour (see the module's docstring).  A bridge's script sets
+    ``MACHINE`` (a key of :data:`MACHINES`: ``"boom"``, ``"excavator"``), its
+    ``description`` and ``variables = bridge_variables(MACHINE)``; from the machine come
 
     * ``KIND``: the recording kind it replays (``recording.recording_kind``);
     * ``MEASURED``: the recording's measured columns, in the order :meth:`measured`
-      takes them (each passes the sensor lag);
-    * ``EXTRA``: further interpolated columns that are outputs as they are (a true
-      force), 0 where the recording has none;
+      takes them (each passes the sensor lag): every joint's p_a, then p_b, then angle;
+    * ``EXTRA``: further interpolated columns that are outputs as they are (the true
+      force: the boom's ``f_ext``, the excavator's ``f_tip_x/y/z``), 0 where the
+      recording has none;
     * ``COMMANDS``: its command inputs, with the recording's applied-command column
-      ``u_applied<suffix>`` for each ``u<suffix>``;
+      ``u_applied<suffix>`` for each ``u<suffix>``."""
 
-    and implements :meth:`measured` (the lagged measured values -> its outputs, e.g. x
-    from an angle), :meth:`sample_values` (a link sample -> ``(measured, extra,
-    applied)``) and, where a rig's answer can be of another machine, :meth:`check_sample`."""
-
+    MACHINE = "boom"
     KIND = "boom"
     MEASURED: tuple = ()
     EXTRA: tuple = ()
     COMMANDS: tuple = ()
 
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        _hold_script_globals(cls)
+        cls.KIND = cls.MACHINE
+        cls.MEASURED, cls.EXTRA, cls.COMMANDS = channels(cls.MACHINE)
+
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
+        self.modelName = MACHINES[self.MACHINE]["model"]
+        self._geom = Geometry()
         self._client = None
         self._losses = 0
         self._t_meas = None
         self._delay = None
         self._lagged = None
 
-    # -- what a subclass says --------------------------------------------------------------
+    # -- the machine's channels ------------------------------------------------------------
     def measured(self, values: tuple) -> None:
-        """Set the outputs from the measured channels' values (after the sensor lag)."""
+        """Set the outputs from the measured channels' values (after the sensor lag), and
+        each piston's x from its angle: the boom's by Eq. 12 with the bridge's geometry,
+        the excavator's by its joint maps (the angles clipped to their limits and x to
+        the stroke: noise and quantisation may step past their ends)."""
         for name, value in zip(self.MEASURED, values):
             setattr(self, name, value)
+        if self.MACHINE == "boom":
+            self.x = x_from_alpha(self.alpha, self._geom)
+            return
+        n = len(JOINTS)
+        angle = values[2 * n:3 * n]
+        x = pistons_from_angles([min(max(a, lo), hi) for a, (lo, hi) in zip(angle, _LIMITS)], _EX)
+        for k, j in enumerate(JOINTS):
+            setattr(self, f"x_{j}", float(min(max(x[k], 0.0), _EX.actuators[k].stroke)))
 
-    def sample_values(self, sample):
+    def sample_values(self, s):
         """A link sample as ``(measured, extra, applied)`` tuples in the declared orders."""
-        raise NotImplementedError
+        if self.MACHINE == "boom":
+            return (s.p_a, s.p_b, s.alpha), (s.f_ext,), (s.u_applied,)
+        return (*s.p_a, *s.p_b, *s.angle), tuple(s.f_tip), tuple(s.u_applied)
 
-    def check_sample(self, sample) -> None:
+    def check_sample(self, s) -> None:
         """Raise :class:`ParameterError` where the rig's answer is not this machine's."""
+        if self.MACHINE == "excavator" and not hasattr(s, "angle"):
+            raise ParameterError("rig", self.rig, "answers as the boom's rig; the excavator bridge needs an "
+                                                   "excavator rig (boomfmi rig serve --config examples/rig/excavator_*.json)")
 
     def check_parameters(self) -> None:
-        """The subclass's own parameters' checks, before the link is set up."""
+        """The machine's own parameters' checks (the boom's geometry), before the link is
+        set up."""
+        if self.MACHINE == "boom":
+            self._geom = Geometry(a=self.a, b=self.b, h=self.h, l_min=self.l_min)
+            check_geometry(self._geom, self.L)
 
     # -- set-up ----------------------------------------------------------------------------
     def setup(self):

@@ -95,10 +95,10 @@ def machine_parameters(values: dict, effects_by_joint: dict, rec) -> dict:
     as ``identify.excavator`` names them; those not given keep the SSP's), the start
     where the recording starts (each piston from its first angles, each chamber's
     pressures absolute) and each joint's effects as its FMUs' options
-    (``model.excavator_reference.joint_fmu_variable``: ``valve_arm.tau_spool``,
+    (``model.machine.joint_fmu_variable``: ``valve_arm.tau_spool``,
     ``cylinder_arm.C_leak``, ``linkage.v_s_arm``; sensor_lag is applied to the outputs)."""
     from ..identify.excavator_outputs import START_WINDOW, machine_for, measured_pistons, ssp_name
-    from ..model.excavator_reference import check_joint_effects, joint_fmu_variable
+    from ..model.machine import check_joint_effects, joint_fmu_variable
     from ..physics.excavator import JOINTS
     ex = machine_for(rec)
     check_joint_effects(effects_by_joint, ex)
@@ -160,7 +160,7 @@ def confirm_machine(values: dict, effects_by_joint: dict, rec, ssp=None, effect_
     is none, or an effect parameter that is not the catalogue's, raises
     :class:`physics.ParameterError` naming it (``effects.arm.piston_leakage.C``)."""
     from ..identify.excavator_outputs import excavator_nrmse, machine_for
-    from ..model.excavator_reference import check_joint_effects
+    from ..model.machine import check_joint_effects
     ssp = Path(ssp) if ssp is not None else built("excavator.ssp")
     ex = machine_for(rec)
     check_joint_effects(effects_by_joint, ex)

@@ -15,7 +15,11 @@ in place of its neighbours':
   motion in, its own motion out; its gap is the position's NRMSE.
 
 A cut is **flagged** on a holdout where its gap exceeds ``NOISE_FACTOR`` times that
-recording's own noise floor plus ``ABS_FLOOR`` (``attribute``'s margins).
+recording's own noise floor plus ``ABS_FLOOR`` (``attribute``'s margins); the load
+cut's threshold adds its model's own error (:func:`_model_error`: the least gap its load,
+or a friction candidate, leaves on the fit recordings it is fitted on, less their noise),
+so a gap within what the cut cannot reproduce where it is fitted is no finding, and a
+friction candidate is named only on a gap beyond that.
 
 **Every effect on any joint.**  On a flagged cut each candidate of the catalogue
 (``model/catalogue.py``) that acts there is fitted **on the fit recordings' cuts** of that
@@ -214,10 +218,11 @@ class CutFinding:
     values: dict | None = None   #: the load cut's joint load identified on the fit cuts
     own_gaps: list | None = None  #: the load cut's gaps with the load identified on each holdout itself
     spreads: list | None = None   #: what the load's static friction interval moves the load cut, per holdout
+    model_error: float = 0.0     #: what the cut's model leaves where it is fitted (:func:`_model_error`), added to its threshold
 
     @property
     def thresholds(self) -> list:
-        return [threshold(n) for n in self.noises]
+        return [threshold(n) + self.model_error for n in self.noises]
 
     @property
     def flagged(self) -> bool:
@@ -449,6 +454,18 @@ def _decide(cut: CutFinding, pairs: list) -> None:
         cut.verdict = ["unexplained"]
 
 
+def _model_error(cut: CutFinding, fit_noise: float) -> float:
+    """What the load cut's model cannot reproduce even on the recordings it is fitted on:
+    the least gap left on the fit cuts, by the joint's load identified there or by any
+    friction candidate fitted there (each with the load re-identified), less the fit
+    cuts' own noise floor.  A holdout's gap within that (beyond the noise's threshold) is
+    the model's error, not something wrong on the holdout: no finding; so a candidate is
+    named only where the gap it is to explain is beyond it too."""
+    fitted = [c.fit_gap for c in cut.candidates if not c.not_fitted and math.isfinite(c.fit_gap)]
+    least = min([cut.fit_gap] + fitted) if math.isfinite(cut.fit_gap) else min(fitted, default=0.0)
+    return max(least - fit_noise, 0.0)
+
+
 def _own_load(f: JointFinding, jl, hold_cuts, notes: list) -> None:
     """A load cut's gap that no friction candidate explains is ``unexplained`` only where
     the joint's load identified on each holdout itself (no effect) still leaves it beyond
@@ -478,7 +495,7 @@ def _own_load(f: JointFinding, jl, hold_cuts, notes: list) -> None:
                      f"noise's threshold): the fit recordings do not pin its starts closely enough to tell; "
                      f"not a finding")
         return
-    if all(g <= h for g, h in zip(own, lc.thresholds)):
+    if all(g <= h + s for g, h, s in zip(own, lc.thresholds, lc.spreads)):
         lc.verdict = []
         notes.append(f"{f.joint}: the load cut's gap ({100 * lc.gap:.2f} %) is within what the joint's load "
                      f"identified on the holdout itself leaves ({100 * float(np.mean(own)):.2f} %): the fit "
@@ -578,7 +595,14 @@ def diagnose_excavator(fit, hold, ex: exc.Excavator = exc.Excavator(), joints=ex
     for joint, f in findings.items():
         _decide(f.pressures, pairs[joint])
         if f.position is not None:
-            _decide(f.position, [])
+            lc = f.position
+            was = lc.flagged
+            lc.model_error = _model_error(lc, float(np.mean([jl.load_noise(c) for c in load_fit[joint]])))
+            if was and not lc.flagged:
+                notes.append(f"{joint}: the load cut's gap ({100 * lc.gap:.2f} %) is within what its model leaves "
+                             f"on the fit recordings themselves ({100 * lc.model_error:.2f} % beyond their noise) "
+                             f"plus the noise's threshold: the model's own error; not a finding")
+            _decide(lc, [])
             if f.position.verdict == ["unexplained"]:
                 _own_load(f, jl, load_hold[joint], notes)
     order = sorted((f for f in findings.values() if f.flagged),

@@ -139,7 +139,8 @@ def diagnose_excavator_recordings(fit_paths, hold_paths, out_dir, progress=None)
                                      "flagged": lc.gaps[k] > lc.thresholds[k], "subsystem": f"linkage ({j})",
                                      "finding": ", ".join(lc.verdict) or None,
                                      "gap_own_load": lc.own_gaps[k] if lc.own_gaps else None,
-                                     "spread_of_the_load": lc.spreads[k] if lc.spreads else None}
+                                     "spread_of_the_load": lc.spreads[k] if lc.spreads else None,
+                                     "model_error": lc.model_error}
             where.append(entry)
         figures.append((str(h.path), _figure(h, curves)))
     for j, f in found.joints.items():

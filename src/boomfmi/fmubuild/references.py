@@ -82,7 +82,7 @@ def _excavator_force_estimator() -> pd.DataFrame:
     (gauge) and angles, the FMU's inputs."""
     from .. import experiments as E
     from ..physics.excavator import JOINTS
-    from ..rig.excavator import run_excavator_offline
+    from ..rig import run_excavator_offline
     t0, t1 = EXCAVATOR_WINDOW
     d = run_excavator_offline({"machine": "excavator", "contact": E.contact("hard_soil").config()},
                               E.digging_cycle(), t1)

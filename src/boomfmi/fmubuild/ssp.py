@@ -19,6 +19,10 @@ applies no parameter binding either, only the ``parameter_set`` it is given, wit
 hierarchical names: so beside the per-component files the SSP carries each cut set
 whole, for this system's components (``resources/<set>.ssv``, ``valve.A_max``), which
 ``fmpy.ssp.ssd.read_ssv(ssp, resource="resources/<set>.ssv")`` reads.
+
+The parameter sets themselves, ``ssp/reference_rig.ssv`` (the boom rig) and
+``ssp/excavator.ssv``, are one writer's, :func:`parameters_ssv`: a machine
+(``model.machine``) gives its joints' values, the FMUs the rest.
 """
 from __future__ import annotations
 
@@ -216,23 +220,82 @@ def pack_ssp(ssd: Path, fmu_dir: Path, out: Path, system_connectors: bool = True
     return out
 
 
-def write_reference_parameters(ssds: list[Path], fmu_dir: Path, out: Path) -> Path:
-    """Write the reference rig's parameter set for the components of ``ssds`` that bind
-    it: every parameter of every such component FMU at its default value (the
-    reference rig's)."""
+#: A machine's parameter set, by its mechanism (``Machine.mechanism``): ``ssp/<name>.ssv``
+#: and its description.  The boom rig's is the reference rig's (every FMU at its default);
+#: the excavator's starts it at rest at mid-stroke.
+PARAMETER_SETS = {
+    "boom": ("reference_rig", "The reference rig of shared/spec/reference-rig.md: every model parameter"),
+    "linkage": ("excavator", "The whole excavator of shared/spec/excavator.md (physics.excavator), at rest at mid-stroke"),
+}
+#: The linkage's longest substep in the excavator SSP [s] (its FMU's default: 0.25 ms).
+#: One substep per 1 ms communication step: within 0.06 % NRMSE of the reference on the
+#: digging cycle, as four substeps are (docs/cosim-accuracy.md), at about half the
+#: linkage's cost.
+LINKAGE_SUBSTEP = 1e-3
+
+
+def _component(machine, kind: str, joint: str) -> str:
+    """The SSP component of ``joint``'s ``kind`` (valve, cylinder): ``valve`` (one joint)
+    or ``valve_arm``, as :meth:`Machine.ssp_name` names ``A_max``'s."""
+    return kind if machine.n == 1 else f"{kind}_{joint}"
+
+
+def machine_parameters(machine) -> dict[str, float]:
+    """The values a machine gives its SSP's components, by hierarchical name: one loop
+    over its joints, each joint's valve (``A_max``), cylinder (``A_a``, ``A_b``, ``L``,
+    ``V_a0``, ``V_b0``, its start pressures ``p_a0``, ``p_b0``) and its mechanism's start
+    position (``boom_load.x0`` or ``linkage.x0_<joint>``); the linkage's substep
+    (:data:`LINKAGE_SUBSTEP`)."""
+    x0, p_a0, p_b0 = machine.start()
+    own: dict[str, float] = {}
+    for i, joint in enumerate(machine.joints):
+        j, m = joint.name, joint.model
+        own[machine.ssp_name(machine.param_name("A_max", j))] = float(m.valve.A_max)
+        cylinder = _component(machine, "cylinder", j)
+        own.update({f"{cylinder}.{n}": float(getattr(m.cylinder, n)) for n in ("A_a", "A_b", "L", "V_a0", "V_b0")})
+        own[f"{cylinder}.p_a0"] = float(p_a0[i])
+        own[f"{cylinder}.p_b0"] = float(p_b0[i])
+        own[machine.ssp_name(machine.param_name("x0", j))] = float(x0[i])
+    if machine.mechanism == "linkage":
+        own[machine.ssp_name("max_substep")] = LINKAGE_SUBSTEP
+    return own
+
+
+def parameters_ssv(machine, ssds, fmu_dir: Path, out: Path) -> Path:
+    """Write ``machine``'s parameter set (:data:`PARAMETER_SETS`, by its mechanism) to
+    ``out``: every parameter of every component of ``ssds`` (one SSD or several) that
+    binds ``resources/<set>_<component>.ssv``, at its FMU's (from ``fmu_dir``) default
+    unless the machine gives it (:func:`machine_parameters`).  The boom rig
+    (``boom_machine(Model())``) writes ``ssp/reference_rig.ssv``, the excavator
+    (``excavator_machine()``) ``ssp/excavator.ssv``; ``build_fmus.py --write-references``
+    rewrites both.  A set no component binds, or a machine's value that no component
+    declares, is refused naming the SSDs (:class:`BuildError`), and nothing is written."""
     from fmpy import read_model_description
-    params: dict[str, tuple[float, str | None]] = {}
-    comps = [(Path(ssd), c) for ssd in ssds for c in ET.parse(ssd).getroot().iter(f"{{{NS['ssd']}}}Component")
-             if any(b.get("source", "").startswith("resources/reference_rig_")
+    set_name, description = PARAMETER_SETS[machine.mechanism]
+    ssds = [Path(ssds)] if isinstance(ssds, (str, Path)) else [Path(s) for s in ssds]
+    comps = [(ssd, c) for ssd in ssds for c in ET.parse(ssd).getroot().iter(f"{{{NS['ssd']}}}Component")
+             if any(b.get("source") == f"resources/{set_name}_{c.get('name')}.ssv"
                     for b in c.iter(f"{{{NS['ssd']}}}ParameterBinding"))]
+    where = ", ".join(str(s) for s in ssds)
+    if not comps:
+        raise BuildError(f"{where}: no component binds resources/{set_name}_<component>.ssv: "
+                         f"nothing to write to {out}")
+    own = machine_parameters(machine)
+    params: dict[str, tuple[object, str | None]] = {}
     for ssd, comp in comps:
         name = comp.get("name")
         md = read_model_description(str(component_fmu(ssd, comp, fmu_dir)))
         for v in md.modelVariables:
-            if v.causality == "parameter" and v.type == "Real":
-                params[f"{name}.{v.name}"] = (float(v.start), v.unit)
-            elif v.causality == "parameter":
-                params[f"{name}.{v.name}"] = ({"Integer": int, "Boolean": lambda s: s in ("true", "1"),
-                                                "String": str}[v.type](v.start), None)
-    return write_ssv(out, "reference_rig", params,
-                     "The reference rig of shared/spec/reference-rig.md: every model parameter")
+            if v.causality != "parameter":
+                continue
+            key = f"{name}.{v.name}"
+            if v.type == "Real":
+                params[key] = (float(own.get(key, float(v.start))), v.unit)
+            else:
+                params[key] = ({"Integer": int, "Boolean": lambda s: s in ("true", "1"),
+                                "String": str}[v.type](v.start), None)
+    unknown = sorted(set(own) - set(params))
+    if unknown:
+        raise BuildError(f"{where}: no component of the {set_name} set declares the machine's "
+                         f"parameter(s) {', '.join(unknown)}")
+    return write_ssv(out, set_name, params, description)

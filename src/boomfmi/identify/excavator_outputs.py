@@ -25,7 +25,7 @@ F_s is raised to F_d where it is below it (Eq. 9) and a negative payload is boun
 (:func:`ssv_values`, :func:`bound_machine`).  The NRMSE are those of that same machine.
 
 **The identified machine on a recording** (:func:`simulate_machine`): the monolithic
-reference (``model.excavator_reference``) with the identified values, driven by the
+reference (``model.reference.simulate_linkage``) with the identified values, driven by the
 recording's four commands (and its tip force where it has one), from the recording's
 first state (the pistons from the mean of the first 20 ms of angles, the chambers at
 their mean pressures then), at rest.  Its step ``H`` = 0.5 ms: on the virtual rig's
@@ -207,7 +207,8 @@ def simulate_machine(rec, ex: exc.Excavator, payload: float = 0.0, h: float = H)
     """The machine ``ex`` with ``payload`` on the recording (see the module's
     docstring): ``t`` and per joint ``x_<j>`` [m], ``p_a_<j>``, ``p_b_<j>`` [Pa gauge]
     on the recording's samples."""
-    from ..model.excavator_reference import ExcavatorMachine, simulate_excavator_reference
+    from ..model.machine import ExcavatorMachine
+    from ..model.reference import simulate_excavator_reference
     d = rec.data if hasattr(rec, "data") else rec
     P_atm = float(getattr(rec, "P_atm", ex.P_atm))
     t = d["t"].to_numpy(float)
@@ -397,8 +398,8 @@ def read_params(path) -> dict[str, float]:
 
 
 #: The tip force's columns of an excavator run file: the estimate and, per axis, the
-#: interval of tip forces consistent with the recording (``physics.excavator_force``;
-#: a side at ``+-excavator_force.F_BOUND`` is open: a stop or a sticking joint leaves
+#: interval of tip forces consistent with the recording (``physics.force_estimation``;
+#: a side at ``+-force_estimation.F_BOUND`` is open: a stop or a sticking joint leaves
 #: it unbounded).
 RUN_FORCES = tuple(f"{k}_{a}" for k in ("f_tip_est", "f_tip_lo", "f_tip_hi") for a in "xyz")
 
@@ -410,7 +411,7 @@ def excavator_run(rec, values: dict[str, float], ex: exc.Excavator | None = None
     columns unsuffixed (``angle_<j>`` from its pistons, ``p_a_<j>``, ``p_b_<j>``), the
     recording's ``_measured``, its commands ``u_<j>`` and true ``f_tip_x/y/z`` where it
     has them, and :data:`RUN_FORCES` from the force estimator on the recording."""
-    from ..physics.excavator_force import estimate_tip_force
+    from ..physics.force_estimation import estimate_tip_force
     d = rec.data
     machine, payload = bound_machine(values, machine_for(rec, ex))
     sim = simulate_machine(rec, machine, payload)

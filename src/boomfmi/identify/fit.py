@@ -30,7 +30,8 @@ Three stages, on every recording given together:
    largest drive force the piston held at rest in mid-stroke is a lower bound.  Where
    the starts do not pin F_s down (the drive force jumps through the static band
    within a sample or two, as in a start under full pressure), the interval says so
-   and F_s is reported as not identified: nothing else depends on it.
+   and F_s is reported as not identified: nothing else depends on it.  Its value is
+   then the starts' upper edge (:func:`upper_edge`), not their flat evidence's mean.
 
 Intervals: for stages 1 and 2 a bootstrap over the runs (blocks of correlated
 residuals) of the linearised fit, for F_s the profile of its cost; each widened by
@@ -416,6 +417,10 @@ STRAY = 0.05     #: probability that a start is not what the model makes of it
 #: F_s's 95 % interval is reported as identifying it when narrower than this share of
 #: its value on either side.
 IDENTIFIED_WIDTH = 0.10
+#: How far the starts' combined (tempered) log-posterior must fall above its best to mark
+#: F_s's upper edge where the starts do not pin it down (:func:`upper_edge`): half a
+#: unit of the untempered log-likelihood, one standard error.
+EDGE_DROP = 0.5 / TEMPER
 
 
 def _starts(r: Motion):
@@ -567,6 +572,12 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
         lo_F, hi_F = min(lo_F, F_s - half), max(hi_F, F_s + half)
     est = _widened("F_s", F_s, min(lo_F, F_s), max(hi_F, F_s))
     identified = hi_F < grid[-2] and est.relative_halfwidth < IDENTIFIED_WIDTH
+    if not identified:
+        # evidence too flat to pin F_s: its mean sits where the flat's lower end (the
+        # grid's floor, a rest's bound) puts it; the starts' upper edge is what they tell
+        edge = upper_edge(grid, total)
+        if edge is not None:
+            est = _widened("F_s", edge, min(lo_F, edge), max(hi_F, edge))
     # the levels whose combined evidence is within a 95 % likelihood ratio of the best
     # (log within 1.92): each start bounds F_s sharply from above (a later start cannot
     # make the motion seen) and only softly from below (an earlier one creeps within the
@@ -576,6 +587,30 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
     return est, identified, {"starts": len(events), "each": each, "lower_bound_N": lower,
                              "grid_N": [float(grid[0]), float(grid[-1])],
                              "likelihood_range_N": [float(keep[0]), float(keep[-1])]}
+
+
+def upper_edge(grid: np.ndarray, log_post: np.ndarray, drop: float | None = None) -> float | None:
+    """F_s read off the starts' combined log-posterior ``log_post`` over ``grid``: the
+    level above its best where it has fallen by ``drop`` (default :data:`EDGE_DROP`),
+    linearly between grid points; None where it never falls that far above its best
+    (no edge on the grid).
+
+    Each start bounds F_s sharply from above (a later start cannot make the motion
+    seen) and only softly from below (an earlier start with a small excess force moves
+    the piston less than the sensor's quantum or noise, which the rest's unknown offset
+    within a quantum absorbs): where the starts do not pin F_s down, their evidence is
+    flat from a lower end (the grid's floor F_d, or a rest's bound) up to an edge near
+    the truth, and the posterior mean sits mid-flat, low by half the flat's width, which
+    grows with the quantum and noise.  The edge does not move with the width."""
+    drop = EDGE_DROP if drop is None else drop
+    lp = np.where(np.isfinite(log_post), log_post, -np.inf)
+    top = int(np.argmax(lp))
+    beyond = np.flatnonzero(lp[top:] < lp[top] - drop)
+    if not len(beyond):
+        return None
+    i = top + int(beyond[0])            # the first grid level beyond the edge
+    a, b = lp[i - 1] - lp[top] + drop, lp[i - 1] - lp[i]
+    return float(grid[i - 1] + (a / b if np.isfinite(b) and b > 0.0 else 0.0) * (grid[i] - grid[i - 1]))
 
 
 def _blurred(post: np.ndarray, width: float) -> np.ndarray:

@@ -16,6 +16,30 @@ stop state machine :class:`StickSlip`, which needs no ODE solve to be tested:
 the measurement path.  This is the yardstick for the co-simulation's error
 (``benchmarks/cosim_accuracy.py``) and, with effects switched on, the diagnosis's fast
 model.
+
+The whole excavator (:func:`simulate_linkage`): four valves, eight chambers and the
+linkage as one system, integrated far finer than any co-simulation of it, with the
+co-simulated components' own physics called directly: each valve's flows and their
+slopes (Eq. 1), each chamber's pressure (Eq. 4 to 7, ``physics.chamber_pressure_step``
+against the valve's linearisation, exact for a closed chamber) and the linkage
+(``physics.advance_linkage``: M, C, G of the four joints, each cylinder through its
+lever, Eq. 9 friction and the end stops per cylinder, the tip force through J^T).  Every
+fine step (``h``, default 50 us, twenty times shorter than the co-simulation's 1 ms) the
+valves see the chambers' newest pressures, the linkage moves under them, and the
+chambers then integrate over exactly the linkage's motion; nothing is held over a
+communication step.  The scheme is first order in ``h``, so its own error is gauged by
+halving ``h`` (``benchmarks/excavator_cosim.py``).  The boom's event-driven solve is not
+used there: with four cylinders each sticking and slipping it would restart at every
+one of the sixteen combinations' transitions, and Eq. 9's stick test couples the joints
+through M; the fine fixed step is the linkage FMU's stick/slip logic at a step where its
+error is negligible.  Each joint's pneumatics step through a :class:`~.boom.Boom` of
+its own (:meth:`.machine.Machine.booms`), so any effect of the catalogue acts on any
+joint: its friction effects through ``advance_linkage``'s per-joint friction hooks
+(:func:`.machine.friction_hook`), its sensor lag on the channels the excavator's bridge
+measures (``p_a``, ``p_b``, ``angle``; ``x`` follows the lagged angle).
+
+:func:`simulate` is the one entry: a :class:`~.machine.Machine` of one joint (the boom
+rig, :func:`~.machine.boom_machine`) by the event-driven solve, of four by the linkage's.
 """
 from __future__ import annotations
 
@@ -28,7 +52,9 @@ from scipy.integrate import solve_ivp
 
 from .. import physics as ph
 from ..physics import reference_rig
+from ..physics.excavator import JOINTS, advance_linkage, joint_angles, pistons_from_angles
 from .boom import Boom, Model
+from .machine import Machine
 
 
 class Layout:
@@ -240,3 +266,125 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
             result.segment(t, t_new, sol.sol, u, f_ext, s == 0)
             t = t_new
     return result.frame(boom)
+
+
+def simulate_linkage(command: Callable[[float], dict], stop_time: float,
+                     machine: Machine | None = None, h: float = 5e-5,
+                     sample: float = 1e-3, f_tip: Callable[[float], tuple] | None = None) -> pd.DataFrame:
+    """The machine from its start under ``command(t) -> {"u_<joint>": V}`` (held over
+    each fine step ``h`` [s]) and the tip force ``f_tip(t)`` [N] (world frame; default
+    none), sampled every ``sample`` [s] (a multiple of ``h``).
+
+    Returns ``time``, then per joint ``u_<j>``, ``p_a_<j>``, ``p_b_<j>`` (absolute [Pa]),
+    ``x_<j>``, ``v_<j>``, ``angle_<j>``.  Each sample holds the state at its time and the
+    command applied from it; a joint with sensor_lag, its ``p_a``, ``p_b`` and ``angle``
+    as its sensors report them (``x`` from that angle).  ``machine.effects`` is checked
+    before any step (:class:`physics.ParameterError` naming the joint or parameter)."""
+    machine = machine or Machine()
+    if machine.mechanism != "linkage":
+        raise ValueError(f"simulate_linkage steps the excavator's linkage, not the {machine.mechanism}'s load: "
+                         "use simulate(machine, ...)")
+    ex = machine.ex
+    booms = machine.booms()
+    per = int(round(sample / h))
+    if per < 1 or abs(per * h - sample) > 1e-12 * sample:
+        raise ValueError(f"the sample interval {sample} s must be a multiple of the step h = {h} s")
+    n_samples = int(round(stop_time / sample))
+    valves = machine.valves
+    x, p_a, p_b = machine.start()
+    x = [float(t) for t in x]
+    v = [0.0] * 4
+    p_a = [float(t) for t in p_a]
+    p_b = [float(t) for t in p_b]
+    payload = machine.payload
+    out = np.empty((n_samples + 1, 1 + 6 * 4))
+    keys = [f"u_{j}" for j in JOINTS]
+
+    def record(i, t, u):
+        out[i, 0] = t
+        out[i, 1:5] = u
+        out[i, 5:9] = p_a
+        out[i, 9:13] = p_b
+        out[i, 13:17] = x
+        out[i, 17:21] = v
+
+    no_tip = (0.0, 0.0, 0.0)
+    closed = (0.0, 0.0, 0.0, 0.0)
+    centre = valves[0].u_centre
+    if any(float(ph.orifice_area(centre, va)) != 0.0 for va in valves):
+        centre = None
+    hooks = machine.friction_hooks(booms)
+    friction = hooks if any(hooks) else None
+    spools = [b.tau_spool > 0.0 for b in booms]
+    cmd0 = command(0.0)
+    y = [float(cmd0[k]) for k in keys]                     # the spools' positions (valve_dynamics)
+    masses = [list(b.air_masses(p_a[j], p_b[j], x[j])) if b.h_wall > 0.0 else None
+              for j, b in enumerate(booms)]
+    for i in range(n_samples):
+        t0 = i * sample
+        cmd = command(t0)
+        record(i, t0, [cmd[k] for k in keys])
+        for s in range(per):
+            t = t0 + s * h
+            if s:
+                cmd = command(t)
+            u = [float(cmd[k]) for k in keys]
+            tip = no_tip if f_tip is None else f_tip(t)
+            mf = []
+            for j in range(4):
+                b = booms[j]
+                c = y[j] if spools[j] else u[j]
+                if b.command_effects:
+                    c = b.opening(c)
+                if c == centre:                 # a closed valve passes nothing (A(u) = 0)
+                    m = closed
+                else:
+                    m = b.valve_flows(c, p_a[j], p_b[j])
+                if b.inflow_effects:
+                    m = b.inflows(*m, p_a[j], p_b[j], x[j])
+                mf.append(m)
+            x1, v1 = advance_linkage((x, v), p_a, p_b, tip, h, ex, payload=payload, max_substep=h,
+                                     friction=friction)
+            for j in range(4):
+                m_a, m_b, s_a, s_b = mf[j]
+                p_a[j], p_b[j] = booms[j].step_chambers(p_a[j], p_b[j], x[j], float(x1[j]), float(m_a), float(m_b),
+                                                        float(s_a), float(s_b), h, masses[j])
+                if spools[j]:
+                    y[j] = booms[j].spool_step(y[j], u[j], h)
+            x = [float(t) for t in x1]
+            v = [float(t) for t in v1]
+    t_end = n_samples * sample
+    cmd = command(t_end) if t_end < getattr(command, "duration", np.inf) else command(t_end - 0.5 * h)
+    record(n_samples, t_end, [cmd[k] for k in keys])
+    cols = (["time"] + keys + [f"p_a_{j}" for j in JOINTS] + [f"p_b_{j}" for j in JOINTS]
+            + [f"x_{j}" for j in JOINTS] + [f"v_{j}" for j in JOINTS])
+    df = pd.DataFrame(out[:, :21], columns=cols)
+    angles = joint_angles(df[[f"x_{j}" for j in JOINTS]].to_numpy(), ex)
+    for k, j in enumerate(JOINTS):
+        df[f"angle_{j}"] = angles[:, k]
+    lagged = [k for k, b in enumerate(booms) if b.measures]
+    if lagged:                         # the sensors of the joints with sensor_lag (the bridge's channels)
+        time = df["time"].to_numpy()
+        for k in lagged:
+            for c in (f"p_a_{JOINTS[k]}", f"p_b_{JOINTS[k]}", f"angle_{JOINTS[k]}"):
+                df[c] = booms[k].measured(df[c].to_numpy(), time)
+        pistons = pistons_from_angles(df[[f"angle_{j}" for j in JOINTS]].to_numpy(), ex)
+        for k in lagged:
+            df[f"x_{JOINTS[k]}"] = pistons[:, k]
+    return df
+
+
+#: The excavator's reference by its former name (``simulate_linkage``).
+simulate_excavator_reference = simulate_linkage
+
+
+def simulate(machine: Machine, command: Callable[[float], dict], stop_time: float, **options) -> pd.DataFrame:
+    """The machine's monolithic reference under ``command``, by its mechanism: one joint
+    (:func:`~.machine.boom_machine`) by the boom's event-driven solve
+    (:func:`simulate_reference`: ``{"u", "f_ext"}`` commands, columns ``u, p_a, ..., alpha``),
+    the linkage by its fine fixed step (:func:`simulate_linkage`: ``{"u_<joint>"}``,
+    columns ``u_<joint>, ..., angle_<joint>``); ``options`` are that solver's."""
+    if machine.mechanism == "boom":
+        machine.check()
+        return simulate_reference(machine.joint_model("boom"), command, stop_time, **options)
+    return simulate_linkage(command, stop_time, machine, **options)

@@ -13,8 +13,8 @@ from .excavator import (JOINTS, Actuator, Excavator, Link, advance_linkage, chec
                         lever_arms, lumped_boom_load, mass_matrix, piston_accelerations,
                         pistons_from_angles, potential_energy, tip_jacobian, tip_torques)
 from .force_estimation import (below_sensor_floor, measured_drive_force, motion_filter_step,
-                               observed_external_force, pneumatic_stiffness, position_error_force,
-                               reflected_force)
+                               observed_external_force, observed_joint_forces, observer_filter_step,
+                               pneumatic_stiffness, position_error_force, reflected_force)
 from .geometry import (alpha_from_x, check_geometry, cylinder_length, linkage_points,
                        phi_from_x, x_from_alpha)
 from .lag import first_order_step
@@ -30,7 +30,8 @@ from .valve import chamber_flow_slopes, chamber_flows, orifice_area
 __all__ = [
     "effects", "reference_rig", "chamber_pressure_step", "chamber_volumes", "pressure_rates",
     "pneumatic_stiffness", "position_error_force", "reflected_force", "first_order_step",
-    "motion_filter_step", "observed_external_force", "measured_drive_force", "below_sensor_floor", "alpha_from_x",
+    "motion_filter_step", "observed_external_force", "observed_joint_forces", "observer_filter_step",
+    "measured_drive_force", "below_sensor_floor", "alpha_from_x",
     "check_geometry", "cylinder_length", "phi_from_x", "x_from_alpha", "linkage_points",
     "acceleration",
     "advance_load", "end_stops", "drive_force", "friction_force", "piston_force", "slide_or_stick", "sliding_velocity",

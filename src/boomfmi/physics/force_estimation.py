@@ -32,15 +32,26 @@ read below atmospheric: where a chamber's reading sits at the sensor's floor, th
 model's pressure stands in when it is lower (:func:`below_sensor_floor`).
 
 The joystick receives ``f_reflect``: ``f_est`` scaled, saturated and rate-limited
-(:func:`reflected_force`).
+(:func:`reflected_force`, per axis for the excavator's 3-axis joystick).
+
+One core for one joint or four: :func:`observed_joint_forces` is the observer of a joint
+set (the boom's one cylinder, with mass M, ``F_L sin(phi)`` among the known forces and
+friction scale ``cos(phi)``; or the excavator's four through the linkage), the rest/hold
+band (:func:`friction_band`) and the stop clipping written once.  The excavator's tip
+force (least squares over the Jacobian transpose, what the joints can tell, the bounds,
+the observer over a recording) is the last section of this module.
 """
 from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from . import _xp as xp
+from . import excavator as exc
 from .chamber import chamber_volumes
 from .geometry import phi_from_x
+from .lag import first_order_step
 from .load import piston_force
 from .params import Cylinder, Gas, Geometry, Load
 
@@ -75,6 +86,19 @@ def motion_filter_step(x_f: float, v_f: float, x_measured: float, dt: float, ome
     return x_new, v, (x_new - x_f) / dt, (v - v_f) / dt
 
 
+def observer_filter_step(x_f: float, v_f: float, d_f: float, dd_f: float, x_measured: float, drive: float,
+                         dt: float, omega: float):
+    """One step of a joint observer's two filters (:func:`motion_filter_step`, corner
+    ``omega`` [rad/s]): the measured position ``x_measured`` [m] and the known forces
+    ``drive`` [N] (:func:`measured_drive_force`) through the same filter, so that the
+    force and ``M a`` carry the same delay.  Returns the position filter's new state
+    ``(x_f, v_f)``, its mean velocity and acceleration over the step, the force
+    filter's new state ``(d_f, dd_f)`` and its mean over the step (the midpoint)."""
+    x_f, v_f, v_mean, a_mean = motion_filter_step(x_f, v_f, x_measured, dt, omega)
+    d_1, dd_f, _, _ = motion_filter_step(d_f, dd_f, drive, dt, omega)
+    return x_f, v_f, v_mean, a_mean, d_1, dd_f, 0.5 * (d_f + d_1)
+
+
 def measured_drive_force(p_a: float, p_b: float, x: float, cyl: Cylinder = Cylinder(),
                          geom: Geometry = Geometry(), load: Load = Load(),
                          P_atm: float = 101_325.0) -> float:
@@ -97,33 +121,91 @@ def below_sensor_floor(p_measured, p_model, p_floor):
     return p_model if (p_measured <= p_floor and p_model < p_measured) else p_measured
 
 
+def friction_band(net: float, v: float, friction, scale: float, direction, margin: float = 0.0):
+    """The interval ``(lo, hi)`` of the external force on one piston [N, positive against
+    extension] that Eq. 8 and 9 allow, ``net`` [N] the known forces less the inertial
+    ones, ``v`` [m/s] its velocity, ``friction`` its ``(K_v, F_s, F_d)`` and ``scale``
+    their normal-force scale: sliding (``direction`` -1 or +1) the sliding law's value
+    ``net - K_v v - F_d scale direction``; at rest (``direction`` None) anything that
+    static friction can hold, ``net +- F_s scale``; widened by ``margin`` [N] each side."""
+    K_v, F_s, F_d = friction
+    if direction is None:
+        hold = F_s * scale + margin
+        return net - hold, net + hold
+    f = net - K_v * v - direction * F_d * scale
+    return f - margin, f + margin
+
+
+def observed_joint_forces(net, x, v, strokes, friction, scale, v_rest: float = 2e-3, x_stop: float = 5e-4,
+                          sliding=None, x_measured=None):
+    """The external force on each piston of a joint set [N, positive against extension]
+    that the equation of motion needs to explain the known forces: the boom's one
+    cylinder (:func:`observed_external_force`) or the excavator's four through the
+    linkage (:func:`observed_joint_torques`).  Per joint: ``net`` [N] the known forces
+    less the inertial ones (drive - M a - bias, positive extending), position ``x``
+    [m] (clipped to ``0 .. strokes``), velocity ``v`` [m/s], ``friction`` the
+    ``(K_v, F_s, F_d)`` of Eq. 8 and 9 and ``scale`` their normal-force scale (the
+    boom's ``cos(phi)``).
+
+    Sliding (``|v|`` above ``v_rest`` [m/s]): ``net - K_v v - F_d scale sign(v)``.  At rest
+    the force friction can hold (``F_s scale``) is taken off the unexplained force,
+    towards zero (the force in :func:`friction_band` nearest none).  ``sliding``
+    (optional, per joint -1, 0 or +1): a joint with a
+    non-zero entry counts as sliding that way, whatever ``v`` says (a slow creep that a
+    fast filter's speed, noisy with the angle sensor's steps, misses).  Within
+    ``x_stop`` [m] of an end stop a force towards that stop is the stop's reaction and
+    is not reported; ``x_measured`` (optional) [m]: the unfiltered positions, a joint
+    within ``x_stop`` of a stop by either counts as there (an arrival's impact reaches
+    the stop in the measurement a filter's delay before the filtered position does).
+
+    Returns lists ``(f, resting, at_stop)``: the forces, and per joint whether it counted
+    as at rest (its force then only what static friction cannot hold) and whether it
+    is at an end stop.  Plain floats per joint: the boom's FMU calls it a thousand
+    times a second."""
+    f, resting, at_stop = [], [], []
+    for i in range(len(net)):
+        L = strokes[i]
+        xi = min(max(x[i], 0.0), L)
+        s = 0 if sliding is None else sliding[i]
+        rest = s == 0 and abs(v[i]) <= v_rest
+        sign = s if s != 0 else v[i]
+        lo, hi = friction_band(net[i], v[i], friction[i], scale[i],
+                               None if rest else (1.0 if sign > 0 else -1.0 if sign < 0 else 0.0))
+        fi = lo if lo > 0.0 else (hi if hi < 0.0 else 0.0)     # the band's force nearest none
+        xl = xi if x_measured is None else min(xi, x_measured[i])
+        xu = xi if x_measured is None else max(xi, x_measured[i])
+        if xl <= x_stop:
+            fi = max(fi, 0.0)    # the lower stop pushes extension: f_ext < 0 cannot be told apart
+        if xu >= L - x_stop:
+            fi = min(fi, 0.0)
+        f.append(fi)
+        resting.append(rest)
+        at_stop.append(xl <= x_stop or xu >= L - x_stop)
+    return f, resting, at_stop
+
+
 def observed_external_force(drive: float, x: float, v: float, a: float,
                             cyl: Cylinder = Cylinder(), geom: Geometry = Geometry(),
                             load: Load = Load(), v_rest: float = 2e-3, x_stop: float = 5e-4) -> float:
     """The external force [N, positive against extension] that Eq. 8 needs to explain
     the known forces ``drive`` [N] (:func:`measured_drive_force`, filtered like the
-    motion), at position ``x`` [m], velocity ``v`` [m/s] and acceleration ``a`` [m/s^2].
+    motion), at position ``x`` [m], velocity ``v`` [m/s] and acceleration ``a`` [m/s^2]:
+    :func:`observed_joint_forces` for the boom's one joint (mass ``M``, friction scale
+    ``cos(phi)``).
 
     Below ``v_rest`` [m/s] the piston counts as at rest: the force friction can hold
     (``F_s cos(phi)``) is taken off the unexplained force, towards zero.  Within
     ``x_stop`` [m] of an end stop, a force towards that stop is the stop's reaction and
     is not reported."""
     c = math.cos(phi_from_x(min(max(x, 0.0), cyl.L), geom))
-    residual = drive - load.M * a
-    if abs(v) > v_rest:
-        f = residual - load.K_v * v - math.copysign(load.F_d * c, v)
-    else:
-        hold = load.F_s * c
-        f = residual - max(-hold, min(hold, residual))
-    if x <= x_stop:
-        f = max(f, 0.0)          # the stop at x = 0 pushes extension: f_ext < 0 cannot be told apart
-    elif x >= cyl.L - x_stop:
-        f = min(f, 0.0)
-    return f
+    f, _, _ = observed_joint_forces((drive - load.M * a,), (x,), (v,), (cyl.L,),
+                                    ((load.K_v, load.F_s, load.F_d),), (c,), v_rest, x_stop)
+    return f[0]
 
 
 def reflected_force(f_est, f_prev, dt, gain, f_max, rate_max):
-    """Joystick force command [N] after ``dt`` [s].
+    """Joystick force command [N] after ``dt`` [s], a float or per axis (the excavator's
+    3-axis joystick: arrays).
 
     The target ``gain * f_est`` is saturated to +-``f_max`` [N]; the command moves from
     ``f_prev`` towards it by at most ``rate_max * dt`` [N].
@@ -131,3 +213,386 @@ def reflected_force(f_est, f_prev, dt, gain, f_max, rate_max):
     target = xp.clip(gain * f_est, -f_max, f_max)
     step = rate_max * dt
     return f_prev + xp.clip(target - f_prev, -step, step)
+
+
+# ---------------------------------------------------------------------------------------
+# The excavator: the tip force from four joints through the linkage
+# ---------------------------------------------------------------------------------------
+#
+# The force of the environment on the bucket tip, and its 3-axis joystick.  Per joint
+# :func:`observed_joint_forces` (the boom's observer) on each cylinder's equation of
+# motion in piston coordinates (``excavator.piston_dynamics``) read backwards::
+#
+#     lam_i (J^T f_tip)_i = (M_x x'' + bias)_i - F_p,i + friction_i
+#
+# with x, x', x'' from the critically damped filter of the measured angles (through
+# Eq. 12 and the triangles to piston positions), F_p the measured pressures' forces
+# through the same filter, the bias the Coriolis, centrifugal and gravity forces.  A
+# joint slides only where it is informative (:func:`informative_joints`); any other is
+# at rest, and one that a slower filter sees still has no speed or acceleration of its
+# own (the angle sensor's steps are not motion).
+#
+# The tip force (three unknowns) from the four joint torques by least squares over the
+# Jacobian transpose, ``min |W (J^T f - tau)|``; the residual ``|J^T f - tau|`` [N m]
+# says how far the four observers disagree (a force elsewhere than at the tip, or a
+# model error, shows there).  A joint that rests (its torque only known to within its
+# static friction) counts with weight ``rest_weight``, one at an end stop (a force towards
+# the stop unknown) with ``stop_weight``.
+
+def observed_joint_torques(x, v, a, drive, ex: exc.Excavator = exc.Excavator(), payload: float = 0.0,
+                           v_rest: float = 2e-3, x_stop: float = 5e-4, sliding=None, x_measured=None):
+    """The joint torques [N m] the environment exerts (``J^T f_tip`` if all of it is at
+    the tip), from the pistons' position ``x`` [m], velocity ``v`` [m/s], acceleration
+    ``a`` [m/s^2] and the pneumatic forces ``drive`` [N] (4-vectors):
+    :func:`observed_joint_forces` through the linkage (``v_rest``, ``x_stop``,
+    ``sliding`` and ``x_measured`` are its) times each cylinder's lever.  Returns
+    arrays ``(tau, resting, at_stop)``."""
+    x = np.clip(np.asarray(x, float), 0.0, ex.strokes)
+    v = np.asarray(v, float)
+    Mx, bias, lam = exc.piston_dynamics(x, v, payload, ex)
+    net = np.asarray(drive, float) - (Mx @ np.asarray(a, float) + bias)
+    f, resting, at_stop = observed_joint_forces(net, x, v, ex.strokes, [(c.K_v, c.F_s, c.F_d) for c in ex.actuators],
+                                                exc.friction_scale(x, ex), v_rest, x_stop, sliding, x_measured)
+    return -np.asarray(f) / lam, np.asarray(resting), np.asarray(at_stop)
+
+
+def tip_force_from_torques(q, tau, weights=None, ex: exc.Excavator = exc.Excavator()):
+    """The tip force [N] (world frame) whose ``J(q)^T f`` best matches the joint torques
+    ``tau`` [N m] (weighted least squares, ``weights`` per joint, default 1), and the
+    residual ``|J^T f - tau|`` [N m] (unweighted) of the four equations."""
+    JT = exc.tip_jacobian(q, ex).T
+    tau = np.asarray(tau, float)
+    w = np.ones(4) if weights is None else np.asarray(weights, float)
+    f, *_ = np.linalg.lstsq(JT * w[:, None], tau * w, rcond=None)
+    return f, float(np.linalg.norm(JT @ f - tau))
+
+
+def informative_joints(x, v, ex: exc.Excavator = exc.Excavator(), v_info: float = 1e-3,
+                       x_stop: float = 2e-3) -> np.ndarray:
+    """Which joints carry information on the tip force: those whose piston slides
+    (speed ``v`` [m/s] above ``v_info``; the observer's slow filter's, which the angle
+    sensor's steps do not shake) off its end stops by ``x_stop`` [m] (the measured
+    position: an arrival's impact reaches the stop before the filters do).  A
+    resting joint's torque is known only to within its static friction, one pressed on
+    a stop not at all (the stop's reaction takes any force towards it): neither gives
+    an equation, only a bound."""
+    x = np.asarray(x, float)
+    return (np.abs(np.asarray(v, float)) > v_info) & (x > x_stop) & (x < ex.strokes - x_stop)
+
+
+def tip_force_determined(q, tau, informative, ex: exc.Excavator = exc.Excavator(), sv_min: float = 0.05,
+                         miss_max: float = 0.1):
+    """The tip force [N] from the informative joints' torques alone, ``nan`` for every
+    world component they do not determine ("cannot tell", instead of a guess).
+
+    The informative rows of ``J^T`` span the directions of force they feel; directions
+    with a singular value below ``sv_min`` [m] (a lever so short that a torque error is
+    amplified more than 1 / sv_min) count as unfelt.  A world component ``k`` is
+    determined when its axis lies within ``miss_max`` (the sine of the angle) of the
+    felt directions: the swing alone feels the lateral force, so with the swing resting
+    or on its stop a force along world x or y is undetermined wherever the upper
+    structure is turned (x = r cos(theta) - t sin(theta)); with fewer than three joints
+    sliding no component may be.  Returns ``(f, known)`` (``known``: bool per axis)."""
+    info = np.asarray(informative, bool)
+    f = np.full(3, np.nan)
+    known = np.zeros(3, bool)
+    if not info.any():
+        return f, known
+    A = exc.tip_jacobian(q, ex).T[info]
+    _, s, vt = np.linalg.svd(A, full_matrices=False)
+    r = int(np.sum(s >= sv_min))
+    if r == 0:
+        return f, known
+    basis = vt[:r]
+    sol = basis.T @ ((basis @ np.linalg.pinv(A) @ np.asarray(tau, float)[info]))
+    miss = np.sqrt(np.clip(1.0 - np.sum(basis ** 2, axis=0), 0.0, None))
+    known = miss <= miss_max
+    f[known] = sol[known]
+    return f, known
+
+
+#: [N] The tip force bounds' box: no tip force beyond this along any world axis (some
+#: ten times the cylinders' largest push at the tip).  A bound at +-F_BOUND says the
+#: recording does not bound that side (a stop takes any force towards it, or the
+#: joints that feel the axis stick with nothing to hold them from one side).
+F_BOUND = 500.0
+#: [1] The sliding law's tolerance per cylinder, as a share of its static friction
+#: ``F_s`` (which scales with the bore, as the pressures' noise on the piston does):
+#: what the angle sensor's noise and steps through the motion filter and the pressures'
+#: noise make of the net force.
+BAND_SLIDE = 0.1
+#: [1] The tolerance's share of the filtered net force's change over the filters' delay.
+BAND_RATE = 1.0
+#: [m/s] The bounds take a joint's sliding law only above this speed (by both filters):
+#: a joint that has just stopped still reads as sliding through the slow filter's
+#: delay, and its static friction may hold more than its sliding friction; below it
+#: its friction band (which holds any slow creep's) bounds it instead.
+V_SLIDE_BOUNDS = 3e-3
+#: [s] The bounds reported are the union of this long a window's samples' sets.
+T_HOLD = 0.01
+#: The triples of constraints whose planes' intersections are the candidate vertices
+#: of the set of tip forces (four joints times two sides, and the box's six).
+_TRIPLES = np.array([(a, b, c) for a in range(14) for b in range(a + 1, 14) for c in range(b + 1, 14)])
+
+
+def joint_force_bands(x, v, a, drive, sliding, at_lower, at_upper, ex: exc.Excavator = exc.Excavator(),
+                      payload: float = 0.0, band=BAND_SLIDE):
+    """Per joint, the interval ``(lo, hi)`` [N m] of ``(J^T f_tip)_i`` consistent with one
+    sample within the tolerance ``band`` [N on the piston, one for all or per joint]:
+    a sliding joint (``sliding`` -1 or +1) the sliding law's value +-``band``; any other
+    its net force +- its static friction ``F_s scale`` (which also covers a slow creep's
+    ``K_v v + F_d``) and ``band``; a joint pressed on its lower stop (``at_lower``) no
+    lower bound, on its upper (``at_upper``) no upper bound (``-inf`` / ``inf``)."""
+    x = np.clip(np.asarray(x, float), 0.0, ex.strokes)
+    v = np.asarray(v, float)
+    Mx, bias, lam = exc.piston_dynamics(x, v, payload, ex)
+    net = np.asarray(drive, float) - (Mx @ np.asarray(a, float) + bias)
+    scale = exc.friction_scale(x, ex)
+    band = np.broadcast_to(np.asarray(band, float), (4,))
+    sliding = np.asarray(sliding, float)
+    lo, hi = np.empty(4), np.empty(4)
+    for i, act in enumerate(ex.actuators):
+        f_lo, f_hi = friction_band(net[i], v[i], (act.K_v, act.F_s, act.F_d), scale[i],
+                                   np.sign(sliding[i]) if sliding[i] != 0 else None, band[i])
+        lo[i], hi[i] = -f_hi, -f_lo          # the pistons' side of J^T f_tip: against their external force
+    lo = np.where(np.asarray(at_lower, bool), -np.inf, lo)
+    hi = np.where(np.asarray(at_upper, bool), np.inf, hi)
+    return lo / lam, hi / lam
+
+
+def tip_force_interval(q, tau_lo, tau_hi, ex: exc.Excavator = exc.Excavator(), f_bound: float = F_BOUND):
+    """Per world axis the smallest and largest tip force [N] with ``tau_lo <= J(q)^T f <=
+    tau_hi`` (per joint, [N m], ``-inf`` / ``inf`` for an open side) and ``|f_k| <=
+    f_bound``: ``(lo, hi, feasible)``, 3-vectors and a bool.  Exact (the set is a
+    polytope in three dimensions: each end is one of its vertices, the intersections of
+    three of its planes that satisfy every constraint), plain NumPy.  A side at
+    ``+-f_bound`` is unbounded by the recording.  Where no force satisfies them all
+    (``feasible`` false) the box, ``-f_bound .. f_bound``."""
+    JT = exc.tip_jacobian(q, ex).T
+    A = np.vstack([JT, -JT, np.eye(3), -np.eye(3)])
+    big = 1e3 * f_bound * max(1.0, float(np.max(np.abs(JT))))
+    b = np.concatenate([np.minimum(np.asarray(tau_hi, float), big), np.minimum(-np.asarray(tau_lo, float), big),
+                        np.full(6, float(f_bound))])
+    A3, b3 = A[_TRIPLES], b[_TRIPLES]
+    det = np.linalg.det(A3)
+    ok = np.abs(det) > 1e-9
+    verts = np.linalg.solve(A3[ok], b3[ok][..., None])[..., 0]
+    tol = 1e-7 * (np.abs(b) + 1.0)
+    inside = np.all(verts @ A.T <= b + tol, axis=1)
+    if not inside.any():
+        box = np.full(3, float(f_bound))
+        return -box, box, False
+    verts = verts[inside]
+    return verts.min(axis=0), verts.max(axis=0), True
+
+
+def _low_pass_known(prev, new, dt: float, tau: float):
+    """The estimate's first-order low-pass, per component, restarted at the new value
+    where the previous one was unknown (nan) and unknown where the new one is."""
+    out = np.full(3, np.nan)
+    for k in range(3):
+        if np.isnan(new[k]):
+            continue
+        out[k] = new[k] if np.isnan(prev[k]) else first_order_step(prev[k], new[k], dt, tau)
+    return out
+
+
+#: [Hz] The filters' corner for the boom, arm and bucket: the estimate's z lags the
+#: force by about 20 ms (the boom's force estimator's lag target) with a quarter of
+#: the acceleration noise that one count of the 12-bit angle makes at 30 Hz.
+F_MOTION = 15.0
+#: [Hz] The swing's: its row of J^T alone feels the lateral force (no other joint's row
+#: averages its noise there), and one count of its angle (46 um at its 60 mm crank)
+#: through a 15 Hz filter reads, on the upper structure's 600 to 900 kg in piston
+#: coordinates, as some 25 N sideways at the tip (3 N at 5 Hz); the lateral estimate
+#: lags by about 60 ms instead.
+F_MOTION_SWING = 5.0
+
+#: [m/s] A joint on an end stop whose slower filter (``f_info``) still reads more than
+#: this is arriving (decelerating), not pressed: the angle sensor's steps alone move
+#: that filter by a millimetre or two per second (12 bits over pi at the swing's 60 mm
+#: crank: one count is 46 um).
+V_ARRIVAL = 10e-3
+
+
+def observer_start(angles, p_a, p_b, ex: exc.Excavator = exc.Excavator()):
+    """The observer's state at its first measurement (``angles`` [rad], absolute
+    pressures [Pa]): filters at rest there, no force."""
+    x = exc.pistons_from_angles(np.asarray(angles, float), ex)
+    F = exc.cylinder_forces(p_a, p_b, ex)
+    return {"x_slow": x, "v_slow": np.zeros(4), "x": x, "v": np.zeros(4), "F": F, "dF": np.zeros(4), "f": np.zeros(3), "f_known": np.full(3, np.nan),
+            "f_lo": np.full(3, -F_BOUND), "f_hi": np.full(3, F_BOUND),
+            "informative": np.zeros(4, bool)}
+
+
+def observer_step(state: dict, angles, p_a, p_b, dt: float, omega, ex: exc.Excavator = exc.Excavator(),
+                  payload: float = 0.0, tau_est: float = 0.004, rest_weight: float = 0.3,
+                  stop_weight: float = 0.02, v_info: float = 1e-3, f_info: float = 3.0,
+                  band_slide=BAND_SLIDE, band_rate: float = BAND_RATE, f_bound: float = F_BOUND,
+                  t_hold: float = T_HOLD):
+    """One step of the excavator's tip-force observer with the measurements held over
+    ``dt`` [s]: joint ``angles`` [rad], absolute pressures [Pa] (4-vectors); ``omega``
+    [rad/s] the filters' corner, one for all joints or one per joint (swing, boom,
+    arm, bucket; see :data:`F_MOTION_SWING`).  Returns ``(state, f_est, residual, tau)``: the new
+    state, the tip force [N] after the first-order low-pass ``tau_est`` [s], the
+    least-squares residual [N m] and the joint torques [N m].
+
+    A joint slides when it is informative (:func:`informative_joints`: sliding by both
+    the fast filter and a slower one of the angles, corner ``f_info`` [Hz], above
+    ``v_info`` [m/s], off its stops); its torque then comes from the sliding law in
+    the slow filter's direction.  Any other joint counts as at rest (its torque known to
+    within its static friction), and one whose slow filter's speed is not above
+    ``v_info`` has no speed and no acceleration of its own: what the fast filter makes
+    of the angle sensor's steps there (a step of one count reads as metres per second
+    squared, and the swing's crank turns that into hundreds of newtons) is noise, not
+    motion.
+
+    Beside the least-squares estimate over all four joints, the estimate from the
+    informative joints alone, ``nan`` where they do not determine a component
+    (:func:`tip_force_determined`), as ``state["f_known"]``, and their mask as
+    ``state["informative"]``.
+
+    The bounds where the machine cannot tell: ``state["f_lo"]``, ``state["f_hi"]`` [N]
+    per world axis, the interval of tip forces consistent with the sample
+    (:func:`joint_force_bands`, :func:`tip_force_interval`): a sliding joint's
+    equation within ``band_slide`` times its static friction [N on the piston, a share
+    per joint or one for all] plus ``band_rate`` times its
+    filtered pneumatic force's change over the filter's delay (``2 / omega``); a
+    resting joint's friction band; one side open for a joint on a stop; ``+-f_bound``
+    where the recording leaves a side open.  Where no force fits the bands, they are
+    widened twice by a factor of 4 before the box ``+-f_bound`` is reported.  The
+    interval reported is the union of the last ``t_hold`` [s] of samples' (the
+    classification of a joint as sliding or sticking flips with the sensor's noise
+    around a start or a stop, and the sets of neighbouring samples with it)."""
+    xm = exc.pistons_from_angles(np.asarray(angles, float), ex)
+    Fm = exc.cylinder_forces(p_a, p_b, ex)
+    omega = np.broadcast_to(np.asarray(omega, float), (4,))
+    xs, vs, v_mean, a_mean = [], [], np.empty(4), np.empty(4)
+    F_new, dF_new, F_mid = np.empty(4), np.empty(4), np.empty(4)
+    for i in range(4):
+        x1, v1, v_mean[i], a_mean[i], F_new[i], dF_new[i], F_mid[i] = observer_filter_step(
+            state["x"][i], state["v"][i], state["F"][i], state["dF"][i], xm[i], Fm[i], dt, omega[i])
+        xs.append(x1)
+        vs.append(v1)
+    x_mid = 0.5 * (np.asarray(state["x"]) + np.asarray(xs))
+    w_info = 2.0 * math.pi * f_info
+    x_slow, v_slow = np.empty(4), np.empty(4)
+    for i in range(4):
+        x_slow[i], v_slow[i], _, _ = motion_filter_step(state["x_slow"][i], state["v_slow"][i], xm[i], dt, w_info)
+    # sliding by both filters the same way: the slow one is not shaken by the sensor's
+    # steps, the fast one stops with the joint (the slow one lags it by 2 / w_info)
+    v_both = np.where(np.sign(v_slow) == np.sign(v_mean), np.sign(v_slow) * np.minimum(np.abs(v_slow), np.abs(v_mean)),
+                      0.0)
+    # off the stops both as measured and as filtered (the filters carry an arrival's
+    # impact for their delay after the measured position reached the stop)
+    info = informative_joints(xm, v_both, ex, v_info) & informative_joints(x_mid, v_both, ex, v_info)
+    # a joint still by both filters, or pressed on a stop, has no motion of its own: the
+    # fast filter's speed and acceleration there are the sensor's steps; one that is
+    # arriving at a stop is decelerating (its impact couples into the others' rows)
+    arriving = np.abs(v_slow) > V_ARRIVAL
+    moving = (np.abs(v_both) > v_info) & (arriving | informative_joints(xm, v_both, ex, v_info, x_stop=5e-4))
+    tau, resting, at_stop = observed_joint_torques(x_mid, np.where(moving, v_mean, 0.0),
+                                                   np.where(moving, a_mean, 0.0), F_mid, ex, payload, 0.0,
+                                                   sliding=np.where(info, np.sign(v_slow), 0.0), x_measured=xm)
+    q = exc.joint_angles(np.clip(x_mid, 0.0, ex.strokes), ex)
+    w = np.where(at_stop, stop_weight, np.where(resting, rest_weight, 1.0))
+    f, residual = tip_force_from_torques(q, tau, w, ex)
+    f_est = np.array([first_order_step(state["f"][k], f[k], dt, tau_est) for k in range(3)])
+    f_det, _ = tip_force_determined(q, tau, info, ex)
+    band = (np.asarray(band_slide, float) * np.array([a.F_s for a in ex.actuators])
+            + band_rate * np.abs(dF_new) * 2.0 / omega)
+    sliding_dir = np.where(info & (np.abs(v_both) > V_SLIDE_BOUNDS), np.sign(v_slow), 0.0)
+    xl, xu = np.minimum(x_mid, xm), np.maximum(x_mid, xm)
+    for widen in (1.0, 4.0, 16.0):
+        t_lo, t_hi = joint_force_bands(x_mid, np.where(moving, v_mean, 0.0), np.where(moving, a_mean, 0.0), F_mid,
+                                       sliding_dir, xl <= 5e-4, xu >= ex.strokes - 5e-4, ex, payload, widen * band)
+        f_lo, f_hi, feasible = tip_force_interval(q, t_lo, t_hi, ex, f_bound)
+        if feasible:
+            break
+    new = {"x_slow": x_slow, "v_slow": v_slow, "x": np.asarray(xs), "v": np.asarray(vs), "F": F_new, "dF": dF_new,
+           "f": f_est, "f_known": _low_pass_known(state.get("f_known", np.full(3, np.nan)), f_det, dt, tau_est),
+           "informative": info}
+    n_hold = max(1, int(round(t_hold / dt)) + 1) if dt > 0 else 1
+    new["bounds_recent"] = (state.get("bounds_recent", [])[-(n_hold - 1):] if n_hold > 1 else []) + [(f_lo, f_hi)]
+    new["f_lo"] = np.min([b[0] for b in new["bounds_recent"]], axis=0)
+    new["f_hi"] = np.max([b[1] for b in new["bounds_recent"]], axis=0)
+    return new, f_est, residual, tau
+
+
+def estimate_tip_force(data, ex: exc.Excavator = exc.Excavator(), payload: float = 0.0, f_motion: float = F_MOTION,
+                       tau_est: float = 0.004, rest_weight: float = 0.3, stop_weight: float = 0.02, P_atm=None,
+                       cannot_tell: bool = False, v_info: float = 1e-3, f_info: float = 3.0,
+                       f_motion_swing: float = F_MOTION_SWING, bounds: bool = False, band_slide=BAND_SLIDE,
+                       band_rate: float = BAND_RATE, f_bound: float = F_BOUND, t_hold: float = T_HOLD):
+    """The observer run over an excavator recording (a DataFrame with its columns,
+    pressures gauge): arrays ``f`` (n, 3) [N] and ``residual`` (n,) [N m].
+
+    ``cannot_tell``: ``f`` from the sliding joints alone (``state["f_known"]``, see
+    :func:`tip_force_determined`), ``nan`` where they do not determine a component,
+    and a third array, the number of informative joints per sample.
+
+    ``bounds``: ``(f, residual, f_lo, f_hi)``, the last two (n, 3) [N], per sample
+    and world axis the interval of tip forces consistent with the recording within
+    its noise (``observer_step``'s ``state["f_lo"]``, ``state["f_hi"]``; a side at
+    ``+-f_bound`` is open: a stop or a sticking joint leaves it unbounded)."""
+    P_atm = ex.P_atm if P_atm is None else P_atm
+    t = data["t"].to_numpy(float)
+    Q = np.column_stack([data[f"angle_{j}"].to_numpy(float) for j in exc.JOINTS])
+    PA = np.column_stack([data[f"p_a_{j}"].to_numpy(float) for j in exc.JOINTS]) + P_atm
+    PB = np.column_stack([data[f"p_b_{j}"].to_numpy(float) for j in exc.JOINTS]) + P_atm
+    omega = 2.0 * math.pi * np.array([f_motion_swing, f_motion, f_motion, f_motion])
+    state = observer_start(Q[0], PA[0], PB[0], ex)
+    f = np.zeros((len(t), 3))
+    res = np.zeros(len(t))
+    f_known = np.full((len(t), 3), np.nan)
+    n_info = np.zeros(len(t), int)
+    f_lo, f_hi = np.full((len(t), 3), -float(f_bound)), np.full((len(t), 3), float(f_bound))
+    for k in range(1, len(t)):
+        state, f[k], res[k], _ = observer_step(state, Q[k], PA[k], PB[k], t[k] - t[k - 1], omega, ex, payload,
+                                               tau_est, rest_weight, stop_weight, v_info, f_info, band_slide,
+                                               band_rate, f_bound, t_hold)
+        f_known[k] = state["f_known"]
+        n_info[k] = int(np.sum(state["informative"]))
+        f_lo[k], f_hi[k] = state["f_lo"], state["f_hi"]
+    if bounds:
+        return f, res, f_lo, f_hi
+    if cannot_tell:
+        return f_known, res, n_info
+    return f, res
+
+
+def tip_force_figures(t, f_true, f_est, f_lo=None, f_hi=None, max_lag: float = 0.2) -> dict:
+    """The tip force estimate's figures over the contact samples only (those where the
+    true force ``f_true`` (n, 3) [N] is not zero), as the benchmarks report them:
+    ``rmse`` [N] per axis, ``peak`` [N] the true force's largest magnitude,
+    ``rmse_share`` each axis' RMSE over that peak, ``delay`` [s] per axis the shift of
+    the estimate behind the truth that correlates them best over the contact samples
+    (up to ``max_lag``; 0 where an axis' true force does not vary), and with the bounds ``f_lo``, ``f_hi`` (n, 3): ``coverage`` per axis
+    and ``coverage_all`` (the share of contact samples where the true force lies
+    within the interval, per axis and on all three at once), ``median_width`` [N] per
+    axis.  ValueError without contact samples."""
+    t = np.asarray(t, float)
+    f_true, f_est = np.asarray(f_true, float), np.asarray(f_est, float)
+    on = np.linalg.norm(f_true, axis=1) > 0.0
+    if not on.any():
+        raise ValueError("no contact samples: the true tip force is zero throughout")
+    peak = float(np.max(np.linalg.norm(f_true[on], axis=1)))
+    rmse = np.sqrt(np.mean((f_est[on] - f_true[on]) ** 2, axis=0))
+    dt = float(np.median(np.diff(t)))
+    idx = np.flatnonzero(on)
+    delay, best = np.zeros(3), np.full(3, -np.inf)
+    for lag in range(0, int(round(max_lag / dt)) + 1):
+        k = idx[idx + lag < len(t)]
+        a = f_est[k + lag] - f_est[k + lag].mean(axis=0)
+        b = f_true[k] - f_true[k].mean(axis=0)
+        norm = np.sqrt(np.sum(a * a, axis=0) * np.sum(b * b, axis=0))
+        corr = np.where(norm > 0, np.sum(a * b, axis=0) / np.where(norm > 0, norm, 1.0), -np.inf)
+        better = corr > best
+        best, delay = np.where(better, corr, best), np.where(better, lag * dt, delay)
+    out = {"contact_samples": int(on.sum()), "peak": peak, "rmse": rmse, "rmse_share": rmse / peak, "delay": delay}
+    if f_lo is not None:
+        lo, hi = np.asarray(f_lo, float)[on], np.asarray(f_hi, float)[on]
+        inside = (f_true[on] >= lo) & (f_true[on] <= hi)
+        out.update(coverage=inside.mean(axis=0), coverage_all=float(np.all(inside, axis=1).mean()),
+                   median_width=np.median(hi - lo, axis=0))
+    return out

@@ -95,3 +95,14 @@ def check_load(load: Load) -> None:
     require_non_negative("F_s", load.F_s)
     require_non_negative("F_d", load.F_d)
     require_finite("F_L", load.F_L)
+
+
+def channel(quantity: str, joint: str, n: int) -> str:
+    """The name of joint ``joint``'s ``quantity`` (``p_a``, ``x``, ``u``, ``angle``,
+    ``K_v`` ...) in a machine of ``n`` joints, the one naming rule of recordings, FMU
+    variables and parameters: one joint (the boom rig) carries no suffix and calls its
+    angle ``alpha`` (Eq. 12); more joints suffix ``_<joint>`` (``p_a_arm``,
+    ``angle_arm``, ``K_v_arm``)."""
+    if n == 1:
+        return "alpha" if quantity == "angle" else quantity
+    return f"{quantity}_{joint}"

@@ -18,10 +18,10 @@ command (or centred, once the watchdog has engaged), then the commanded step (up
 datagrams never put the rig behind its driver.
 
 The plant is the boom's :class:`~boomfmi.rig.plant.VirtualRig` or the excavator's
-:class:`~boomfmi.rig.excavator.ExcavatorRig`: the latter takes excavator commands (four
+:class:`~boomfmi.rig.plant.ExcavatorRig`: the latter takes excavator commands (four
 valve voltages) and answers with excavator samples (``link/protocol.py``, kinds 4 and
 5); a command of the other machine is ignored and counted as malformed.  The
-excavator's recording has its own columns (``rig.excavator.COLUMNS`` and failsafe).
+excavator's recording has its own columns (``rig.offline.COLUMNS`` and failsafe).
 
 Datagrams that are malformed, fail authentication, belong to no open session or repeat
 an old sequence number of their session (replay protection per session, whatever port
@@ -144,7 +144,7 @@ class RigServer:
         self.seq = 0
         self.sample = plant.measure()
         if self.excavator:
-            from .excavator import COLUMNS as EXCAVATOR_COLUMNS
+            from .offline import COLUMNS as EXCAVATOR_COLUMNS
             columns = (*EXCAVATOR_COLUMNS, "failsafe")
         else:
             columns = COLUMNS
@@ -159,7 +159,7 @@ class RigServer:
     def _record(self, s, u: float) -> None:
         if self.writer:
             if self.excavator:
-                from .excavator import sample_row
+                from .offline import sample_row
                 row = [*sample_row(s, u), float(self.failsafe)]
             else:
                 row = [s.t, u, s.p_a, s.p_b, s.alpha, s.f_ext, s.x, float(self.failsafe)]

@@ -35,7 +35,7 @@ import pandas as pd
 
 from ..physics import Cylinder, Geometry, linkage_points, x_from_alpha
 from ..physics import excavator
-from ..physics.excavator_force import F_BOUND
+from ..physics.force_estimation import F_BOUND
 from ..physics import reference_rig
 from ..recording import read_recording
 
@@ -205,8 +205,8 @@ TIP_FORCES = {"f_tip": "f_tip", "f_tip_est": "f_tip_est", "f_reflect": "f_reflec
 #: m of arrow per N of tip force, on the page
 TIP_FORCE_SCALE = 0.25 / 50.0
 #: the interval of the estimated tip force per axis (``f_tip_lo_<a>``, ``f_tip_hi_<a>``,
-#: ``physics.excavator_force``): frame key -> the run's column prefix.  A side at
-#: ``+-excavator_force.F_BOUND`` or beyond is open (a stop or a sticking joint leaves
+#: ``physics.force_estimation``): frame key -> the run's column prefix.  A side at
+#: ``+-force_estimation.F_BOUND`` or beyond is open (a stop or a sticking joint leaves
 #: it unbounded) and is sent as None, per axis.
 TIP_BOUNDS = {"f_tip_lo": "f_tip_lo", "f_tip_hi": "f_tip_hi"}
 

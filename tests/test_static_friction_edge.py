@@ -1,0 +1,79 @@
+"""F_s where the starts do not pin it down: their upper edge (issue 32, item 4).
+
+Each start bounds F_s sharply from above (a later start cannot make the motion seen) and
+only softly from below (an earlier start with a small excess force moves the piston less
+than the sensor's quantum): with a coarse angle sensor the starts' evidence is flat from
+the grid's floor (F_d) up to an edge near the truth.  Its mean sat mid-flat, low by half
+the flat's width (the boom on hybrid_rig.py, 12-bit angle sensor: -7 % over ten noise
+draws); where the starts do not identify F_s its value is now that edge.
+"""
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from boomfmi.identify.fit import EDGE_DROP, TEMPER, upper_edge
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _flat_topped(truth: float, floor: float, fall: float, rng):
+    """Evidence in closed form on an even grid [N]: flat (within a little noise) from
+    ``floor`` to ``truth``, then a normal fall of width ``fall`` [N] (a later start misses
+    the first motion: its misfit grows with the delay), tempered as the starts' are."""
+    grid = np.linspace(floor, 2.0 * truth, 400)
+    ll = -0.5 * (np.maximum(grid - truth, 0.0) / fall) ** 2 / TEMPER
+    return grid, ll + 0.01 * rng.standard_normal(len(grid)) / TEMPER
+
+
+@pytest.mark.parametrize("floor_share", [0.75, 0.9])
+def test_the_upper_edge_of_a_flat_topped_evidence_is_the_truth_whatever_its_width(floor_share):
+    rng = np.random.default_rng(0)
+    truth, fall = 113.0, 0.5
+    grid, ll = _flat_topped(truth, floor_share * truth, fall, rng)
+    w = np.exp(ll - ll.max())
+    w /= w.sum()
+    # the old point estimate, the mean: low by about half the flat's width
+    assert float(w @ grid) / truth - 1.0 < -0.4 * (1.0 - floor_share)
+    edge = upper_edge(grid, ll)
+    # the edge: beyond the truth by at most the fall's width at EDGE_DROP (one untempered standard error)
+    assert truth <= edge <= truth + fall * np.sqrt(2.0 * EDGE_DROP * TEMPER) + (grid[1] - grid[0])
+    assert abs(edge / truth - 1.0) < 0.01
+
+
+def test_no_edge_on_the_grid_is_said_not_invented():
+    grid = np.linspace(80.0, 300.0, 200)
+    assert upper_edge(grid, np.zeros(200)) is None                     # flat to the grid's top
+    ll = np.where(grid < 120.0, -np.inf, -0.0005 * (grid - 120.0))    # a rest's lower bound, a slow slope
+    assert upper_edge(grid, ll) is None
+    ll = np.where(grid < 120.0, -np.inf, -((grid - 120.0) / 5.0) ** 2)
+    assert 120.0 < upper_edge(grid, ll) < 125.0
+
+
+def test_a_start_seen_through_a_coarse_angle_sensor_reads_F_s_at_the_edge_and_still_flags_it():
+    """The boom's reference load on hybrid_rig.py, a 12-bit / 300 deg angle sensor,
+    random steps (benchmarks/identification.py part 3, noise seed 0): F_s came out
+    7.7 % low (the flat's mean); now within 1 %, still flagged (the starts cannot tell it
+    within 10 %), its interval holding the truth and the other parameters untouched."""
+    spec = importlib.util.spec_from_file_location("hybrid_rig", ROOT / "benchmarks" / "hybrid_rig.py")
+    hr = sys.modules.get("hybrid_rig") or importlib.util.module_from_spec(spec)
+    if "hybrid_rig" not in sys.modules:
+        sys.modules["hybrid_rig"] = hr
+        spec.loader.exec_module(hr)
+    from boomfmi.experiments import random_steps
+    from boomfmi.identify.fit import identify
+    from boomfmi.identify.preprocess import prepare
+    from boomfmi.physics import reference_rig
+    from boomfmi.recording import Recording
+    load = {k: float(getattr(reference_rig, k)) for k in ("K_v", "F_s", "F_d", "F_L", "M")}
+    df = hr.simulate(hr.Plant(**load, sensors={}), random_steps(1, duration=10.0), seed=0)
+    res = identify([prepare(Recording(Path("steps.csv"), df[["t", "u", "p_a", "p_b", "alpha"]]))])
+    F_s = res.params["F_s"]
+    assert not res.details["static_friction"]["identified"]
+    assert any("F_s" in w for w in res.warnings), res.warnings
+    assert F_s.value == pytest.approx(load["F_s"], rel=0.01)
+    assert F_s.ci95[0] <= load["F_s"] <= F_s.ci95[1]
+    for k in ("K_v", "F_d", "F_L", "M"):
+        assert res.params[k].value == pytest.approx(load[k], rel=0.05), k
