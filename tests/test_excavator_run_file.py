@@ -103,8 +103,8 @@ def test_export_plots_include_the_history_before_start(files, monkeypatch):
     10 s window; ``--history S`` chooses), not a plot that begins at the start."""
     from boomfmi.view import export as ex
     seen = []
-    original = ex._Figure._update_plots
-    monkeypatch.setattr(ex._Figure, "_update_plots", lambda self, f: (seen.append(f["t"]), original(self, f)))
+    original = ex.Drawing._update_plots
+    monkeypatch.setattr(ex.Drawing, "_update_plots", lambda self, f: (seen.append(f["t"]), original(self, f)))
     path, n = ex.export(files["rec"], files["dir"] / "v.gif", fps=5, start=1.0, stop=1.2, size="320x200",
                         history=0.6)
     assert n == 2 and path.stat().st_size > 0

@@ -28,7 +28,7 @@ import pytest
 from boomfmi.experiments import contact, digging_cycle
 from boomfmi.physics import excavator
 from boomfmi.recording import write_recording
-from boomfmi.view.frames import ExcavatorRun, excavator_angle_map, live_frame, load_run
+from boomfmi.view.frames import excavator_angle_map, live_frame, load_run
 
 JOINTS = excavator.JOINTS
 KEY = b"excavator-view-test-key-0123456789"
@@ -93,7 +93,7 @@ def contact_time(data) -> float:
 # -- frames -----------------------------------------------------------------------------------
 def test_frames_carry_the_recording_s_angles_and_the_linkage_s_points(runs):
     run = load_run(runs["run"])
-    assert isinstance(run, ExcavatorRun) and run.model is not None and run.has_truth
+    assert run.kind == "excavator" and run.model is not None and run.has_truth
     d = runs["data"]
     for k in (0, 1234, len(d) - 1):
         f = run.frame(d["t"][k])
@@ -156,10 +156,10 @@ def test_the_export_draws_the_recording_s_angles_and_the_tip_forces(runs):
     angles, in the side (x-z) and top (x-y) views, the ghost the model's; in the soil both
     tip forces are arrows whose heads are beside the tip."""
     import matplotlib.pyplot as plt
-    from boomfmi.view.export import EXCAVATOR_LINKS, TIP_SIDE, ExcavatorDrawing
+    from boomfmi.view.export import EXCAVATOR_LINKS, TIP_SIDE, Drawing
     run = load_run(runs["run"])
     d, tc = runs["data"], contact_time(runs["data"])
-    drawing = ExcavatorDrawing(run, 640, 360)
+    drawing = Drawing.of(run, 640, 360)
     try:
         drawing.show(tc)
         at = lambda col: float(np.interp(tc, d["t"], d[col]))

@@ -405,7 +405,7 @@ RUN_FORCES = tuple(f"{k}_{a}" for k in ("f_tip_est", "f_tip_lo", "f_tip_hi") for
 
 
 def excavator_run(rec, values: dict[str, float], ex: exc.Excavator | None = None) -> pd.DataFrame:
-    """The excavator run file of a recording (the view's ``load_excavator_run``): the
+    """The excavator run file of a recording (the view's ``load_run``): the
     machine identified as ``values`` (:func:`read_params`) simulated on the
     recording's commands (:func:`simulate_machine`) beside the machine, the model's
     columns unsuffixed (``angle_<j>`` from its pistons, ``p_a_<j>``, ``p_b_<j>``), the

@@ -1,12 +1,13 @@
 """The virtual view rendered to a video file, without a browser: ``boomfmi view --replay
 RUN.csv --export out.mp4`` (or ``.gif``), for reports.
 
-The same frames as the page (``frames.Run.frame``), the same elements: the linkage
-in 3D (base, boom with its bucket, cylinder body and rod) for the machine, the model as
-a translucent ghost, the estimated force as an arrow whose head is at the bucket (the
-rig's true force beside it, grey), and the plots of p_a, p_b, x and the force over the
-last 10 s.  An excavator's run (``frames.ExcavatorRun``) is drawn in two orthographic
-projections, the side (x-z) and the top (x-y), from the points of the linkage's forward
+The same frames as the page (``frames.Run.frame``), the same elements; one
+:class:`Drawing`, its machine's artists its mechanism's.  The boom (:class:`BoomDrawing`):
+the linkage in 3D (base, boom with its bucket, cylinder body and rod) for the machine, the
+model as a translucent ghost, the estimated force as an arrow whose head is at the bucket
+(the rig's true force beside it, grey), and the plots of p_a, p_b, x and the force over
+the last 10 s.  The excavator (:class:`LinkageDrawing`, a ``frames.Run`` of the
+``LinkageMechanism``) is drawn in two orthographic projections, the side (x-z) and the top (x-y), from the points of the linkage's forward
 kinematics its frames carry: the upper structure, boom, arm and bucket and the four
 cylinders, the model's ghost, the tip forces as arrows whose heads are at the tip, and the
 page's plots (joint angles, p_a and p_b per joint, the tip force).  Drawn by matplotlib;
@@ -20,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..physics import excavator
-from .frames import TIP_FORCE_SCALE, ExcavatorRun, Run, heading, load_run, scene
+from .frames import TIP_FORCE_SCALE, Run, heading, load_run
 
 MACHINE, GHOST, FORCE, TRUTH, STEEL, BASE = "#f0a030", "#5ab0ff", "#ff4d5e", "#9aa3b5", "#b8c0cc", "#59606c"
 FORCE_SCALE = 0.15 / 500          # m of arrow per N, as on the page
@@ -54,10 +55,12 @@ def _size(size: str) -> tuple[int, int]:
     return w - w % 2, h - h % 2             # H.264 wants even sides
 
 
-class _Figure:
-    """What the boom's and the excavator's drawings share: the figure, its grid (the
+class Drawing:
+    """A run's drawing, for the machine of one joint or four: the figure, its grid (the
     machine on the left, four plots of the last WINDOW seconds on the right), the title
-    and the read-out; :meth:`_update_plots` appends a frame to the plots."""
+    and the read-out; :meth:`show` poses it for one frame, :meth:`_update_plots` appends a
+    frame to the plots.  The machine's own artists are its mechanism's
+    (:class:`BoomDrawing`, :class:`LinkageDrawing`); :meth:`of` makes the run's."""
 
     def __init__(self, run, width: int, height: int, legend: str, left: float = 0.01):
         import matplotlib
@@ -70,6 +73,20 @@ class _Figure:
         self.text = self.fig.text(0.015, 0.93, "", color="#d9dee7", family="monospace", fontsize=9, va="top")
         self.fig.text(0.015, 0.975, f"boomfmi virtual view: {run.path.name}   {legend}", color="#8a93a3", fontsize=9)
         self.plots = []
+
+    @staticmethod
+    def of(run: Run, width: int, height: int) -> "Drawing":
+        """The drawing of ``run``'s mechanism (``frames.Run.kind``)."""
+        return {"boom": BoomDrawing, "excavator": LinkageDrawing}[run.kind](run, width, height)
+
+    def show(self, t: float) -> list:
+        f = self.run.frame(t)
+        self._pose(self.machine, f["machine"])
+        self._pose(self.ghost, f["model"])
+        self._forces(f)
+        self.text.set_text(self._readout(f))
+        self._update_plots(f)
+        return []
 
     def _axes(self, cell, title: str):
         """An axes of the figure in the page's style."""
@@ -107,12 +124,12 @@ class _Figure:
                 ax.set_ylim(lo - pad, hi + pad)
 
 
-class Drawing(_Figure):
-    """The boom's figure and its artists; :meth:`show` poses them for one frame."""
+class BoomDrawing(Drawing):
+    """The boom's artists: the linkage in 3D, its ghost and the piston's forces."""
 
     def __init__(self, run: Run, width: int, height: int):
         super().__init__(run, width, height, "machine (orange), model ghost (blue), f_est (red), f_ext (grey)")
-        self.g = scene(run.geom, run.L)
+        self.g = run.scene()
         grid = self.grid
         ax = self.fig.add_subplot(grid[:, 0], projection="3d", facecolor="#1c2027")
         self.ax3 = ax
@@ -183,20 +200,17 @@ class Drawing(_Figure):
             head.set_data_3d([T[0]], [0.03], [T[1]])
             head.set_marker("v" if dy < 0 else "^")
 
-    def show(self, t: float) -> list:
-        f = self.run.frame(t)
-        self._pose(self.machine, f["machine"])
-        self._pose(self.ghost, f["model"])
+    def _forces(self, f: dict) -> None:
         T = f["machine"]["T"]
         angle = math.atan2(T[1], T[0]) if T else 0.0
         self._arrow(self.f_est, self.f_est_head, f["f_est"], T, angle)
         self._arrow(self.f_ext, None, f["f_ext"], T, angle)
+
+    def _readout(self, f: dict) -> str:
         deg = lambda p: f"{math.degrees(p['alpha']):6.2f}" if p and p["alpha"] is not None else "     -"
         num = lambda v, d=0: "-" if v is None else f"{v:.{d}f}"
-        self.text.set_text(f"t      {f['t']:.3f} s\nalpha  {deg(f['machine'])} deg machine   {deg(f['model'])} deg model\n"
-                           f"f_est  {num(f['f_est'])} N   f_ext {num(f['f_ext'])} N   f_reflect {num(f['f_reflect'], 2)} N")
-        self._update_plots(f)
-        return []
+        return (f"t      {f['t']:.3f} s\nalpha  {deg(f['machine'])} deg machine   {deg(f['model'])} deg model\n"
+                f"f_est  {num(f['f_est'])} N   f_ext {num(f['f_ext'])} N   f_reflect {num(f['f_reflect'], 2)} N")
 
 
 #: the excavator's drawn segments: the upper structure (swing axis to boom pivot) and
@@ -207,12 +221,12 @@ CYLINDER_BODY = 0.55              # the body's share of a cylinder's eye-to-eye 
 TIP_SIDE = 0.03                   # m: the arrows' heads beside the tip, across the machine's plane
 
 
-class ExcavatorDrawing(_Figure):
-    """The whole excavator's figure: two orthographic projections of the machine, the
+class LinkageDrawing(Drawing):
+    """The whole excavator's artists: two orthographic projections of the machine, the
     side (x-z, large) and the top (x-y), the model's ghost and the tip forces in both,
-    the read-out, and the plots; :meth:`show` poses them for one frame."""
+    and its plots."""
 
-    def __init__(self, run: ExcavatorRun, width: int, height: int):
+    def __init__(self, run: Run, width: int, height: int):
         super().__init__(run, width, height, "machine (orange), model ghost (blue), f_tip_est (red), "
                                              "f_tip (grey)", left=0.04)
         left = self.grid[:, 0].subgridspec(2, 2, height_ratios=(3, 2), hspace=0.18, wspace=0.08)
@@ -311,24 +325,21 @@ class ExcavatorDrawing(_Figure):
             a.set_positions((tail[0], tail[k]), (head[0], head[k]))
             a.set_visible(True)
 
-    def show(self, t: float) -> list:
-        f = self.run.frame(t)
-        self._pose(self.machine, f["machine"])
-        self._pose(self.ghost, f["model"])
+    def _forces(self, f: dict) -> None:
         pts = f["machine"]["points"]
         tip = pts["tip"] if pts else None
         yaw = heading(pts) if pts else 0.0
         across = TIP_SIDE * np.array([-math.sin(yaw), math.cos(yaw), 0.0])
         self._arrow(self.arrows["f_tip_est"], f["f_tip_est"], tip, across)
         self._arrow(self.arrows["f_tip"], f["f_tip"], tip, -across)
+
+    def _readout(self, f: dict) -> str:
         deg = lambda p, j: "      -" if not p or p["angle"][j] is None else f"{math.degrees(p['angle'][j]):7.2f}"
         vec = lambda v: "   -" if v is None else " ".join(f"{c:6.1f}" for c in v)
         lines = [f"t       {f['t']:.3f} s", "        machine  model [deg]"]
         lines += [f"{j:<8}{deg(f['machine'], j)}  {deg(f['model'], j)}" for j in excavator.JOINTS]
         lines += [f"f_tip_est [N] {vec(f['f_tip_est'])}", f"f_tip     [N] {vec(f['f_tip'])}"]
-        self.text.set_text("\n".join(lines))
-        self._update_plots(f)
-        return []
+        return "\n".join(lines)
 
 
 def _bar(p):
@@ -357,7 +368,7 @@ def export(replay, out, fps: float = 25.0, start: float | None = None, stop: flo
         raise ValueError(f"nothing to render between {t0:g} and {t1:g} s (the run spans "
                          f"{run.t[0]:g} to {run.t[-1]:g} s)")
     times = np.arange(t0, t1 + 1e-9, 1.0 / fps)
-    drawing = (ExcavatorDrawing if run.kind == "excavator" else Drawing)(run, width, height)
+    drawing = Drawing.of(run, width, height)
     for t in np.arange(max(t0 - min(history, WINDOW), run.t[0]), t0 - 0.5 / fps, 1.0 / fps):
         drawing._update_plots(run.frame(float(t)))   # the plots' past: drawn, not a frame of the video
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -20,9 +20,10 @@ boom pivot O at the origin (``physics.linkage_points``); the page draws from the
 points and does no geometry of its own.
 
 An **excavator** run (its recording's kind, ``recording.recording_kind``) gives
-:class:`ExcavatorRun` and frames of ``"kind": "excavator"``: the whole machine's points
-in 3D from ``physics.excavator.forward_kinematics`` (see the excavator section below).
-:func:`load_run` and :func:`live_frame` tell the two apart.
+a :class:`Run` of the :class:`LinkageMechanism` and frames of ``"kind": "excavator"``: the
+whole machine's points in 3D from ``physics.excavator.forward_kinematics`` (see the
+excavator section below); a boom run's mechanism is the :class:`BoomMechanism`.
+:func:`load_run` and :func:`live_frame` tell the two apart; the rest is the same code.
 """
 from __future__ import annotations
 
@@ -44,138 +45,6 @@ from ..recording import read_recording
 TIP_OVER_B = 2.0
 POSTURE = ("alpha", "x", "p_a", "p_b")
 FORCES = ("f_est", "f_ext", "f_reflect")
-
-
-def scene(geom: Geometry = Geometry(), L: float = reference_rig.L) -> dict:
-    """The fixed parts of the drawing [m]: the pivots O and C, the stroke, the
-    cylinder's body and rod lengths and bore, the bucket tip's distance from O."""
-    C, _ = linkage_points(0.0, geom)
-    return {"O": [0.0, 0.0], "C": [C[0], C[1]], "a": geom.a, "b": geom.b, "h": geom.h,
-            "l_min": geom.l_min, "L": L, "r_tip": TIP_OVER_B * geom.b,
-            "body_length": geom.l_min - 0.02, "rod_length": L + 0.03,
-            "bore": reference_rig.bore, "rod": reference_rig.rod}
-
-
-def _tip(R):
-    """The bucket's tip T on the ray O->R, at TIP_OVER_B * b from O."""
-    return TIP_OVER_B * R[0], TIP_OVER_B * R[1]
-
-
-@dataclass
-class Run:
-    """A run's columns as arrays: ``machine`` and ``model`` map POSTURE names to arrays
-    (``model`` is None for a recording of the machine alone); ``forces`` maps the
-    FORCES present."""
-    path: Path
-    t: np.ndarray
-    machine: dict
-    model: dict | None
-    forces: dict
-    geom: Geometry
-    L: float
-
-    kind = "boom"
-
-    @property
-    def duration(self) -> float:
-        return float(self.t[-1] - self.t[0])
-
-    @property
-    def has_truth(self) -> bool:
-        return "f_ext" in self.forces
-
-    def scene(self) -> dict:
-        return scene(self.geom, self.L)
-
-    def frame(self, t: float) -> dict:
-        """The frame at time ``t`` [s]: linear interpolation between samples (exact at
-        a sample's time), the run's ends held outside it."""
-        t = min(max(float(t), float(self.t[0])), float(self.t[-1]))
-        i = int(np.searchsorted(self.t, t, side="right")) - 1
-        i = min(max(i, 0), len(self.t) - 1)
-        if i < len(self.t) - 1 and self.t[i + 1] > self.t[i]:
-            w = (t - self.t[i]) / (self.t[i + 1] - self.t[i])
-        else:
-            w = 0.0
-
-        def at(col: np.ndarray) -> float:
-            v = col[i] if w == 0.0 else col[i] + w * (col[i + 1] - col[i])
-            return None if not math.isfinite(v) else float(v)
-
-        def posture(cols: dict) -> dict:
-            out = {k: at(cols[k]) for k in POSTURE}
-            return dict(out, **points(out["alpha"], self.geom))
-
-        return {"type": "frame", "t": t, "machine": posture(self.machine),
-                "model": posture(self.model) if self.model is not None else None,
-                **{k: (at(self.forces[k]) if k in self.forces else None) for k in FORCES}}
-
-    def history(self, t: float, window: float = 10.0, rate: float = 30.0) -> list[dict]:
-        """Frames over the ``window`` seconds before ``t``, ``rate`` per second, for the
-        page's plots after a seek or a (re)connection."""
-        start = max(float(self.t[0]), t - window)
-        n = int((t - start) * rate)
-        return [self.frame(start + k / rate) for k in range(n)] + [self.frame(t)]
-
-
-def points(alpha: float | None, geom: Geometry) -> dict:
-    """The moving pivots for a boom angle: R (the rod's) and T (the bucket's tip)."""
-    if alpha is None:
-        return {"R": None, "T": None}
-    _, R = linkage_points(alpha, geom)
-    return {"R": [float(R[0]), float(R[1])], "T": list(map(float, _tip(R)))}
-
-
-def load_run(path) -> "Run | ExcavatorRun":
-    """Read a run file (see the module's text), the boom's or the excavator's; raises
-    RecordingError naming the file, line and column of anything malformed."""
-    rec = read_recording(path)
-    if rec.kind == "excavator":
-        return load_excavator_run(rec)
-    d: pd.DataFrame = rec.data
-    geom = rec.rig_tuple(Geometry)
-    L = rec.rig_tuple(Cylinder).L
-
-    def posture(suffix: str) -> dict:
-        cols = {k: d[k + suffix].to_numpy(float) for k in ("alpha", "p_a", "p_b")}
-        x = d.get("x" + suffix)
-        cols["x"] = x.to_numpy(float) if x is not None else np.asarray(x_from_alpha(cols["alpha"], geom))
-        return cols
-
-    if "alpha_measured" in d:
-        machine, model = posture("_measured"), posture("")
-    else:
-        machine, model = posture(""), None
-    forces = {k: d[k].to_numpy(float) for k in FORCES if k in d}
-    return Run(Path(path), d["t"].to_numpy(float), machine, model, forces, geom, L)
-
-
-def live_frame(sample: dict, geom: Geometry) -> dict:
-    """A frame from one live sample: the flat mapping a co-simulation sends
-    (``view.live.LiveSender``): ``t``, the model's ``alpha, x, p_a, p_b``, the machine's
-    ``alpha_measured, ...``, and whichever forces it has.  A sample without the
-    machine's columns shows the model as the machine (a model-only run).  An
-    excavator's sample (``angle_<joint>``...) gives its frame (:func:`live_excavator_frame`)."""
-    if is_excavator_sample(sample):
-        return live_excavator_frame(sample)
-
-    def posture(suffix: str) -> dict | None:
-        alpha = sample.get("alpha" + suffix)
-        if alpha is None:
-            return None
-        x = sample.get("x" + suffix)
-        out = {"alpha": float(alpha), "x": float(x) if x is not None else float(x_from_alpha(alpha, geom)),
-               "p_a": sample.get("p_a" + suffix), "p_b": sample.get("p_b" + suffix)}
-        return dict(out, **points(out["alpha"], geom))
-
-    machine, model = posture("_measured"), posture("")
-    if machine is None:
-        machine, model = model, None
-    if machine is None:
-        raise ValueError("a live sample needs alpha or alpha_measured")
-    return {"type": "frame", "t": float(sample.get("t", 0.0)), "machine": machine, "model": model,
-            **{k: sample.get(k) for k in FORCES}}
-
 
 
 # -- the whole excavator ----------------------------------------------------------------------
@@ -268,39 +137,203 @@ def _mid_stroke() -> np.ndarray:
     return 0.5 * excavator.excavator_parameters().strokes
 
 
-def excavator_points(q) -> dict:
-    """The drawing's points [m, world frame] for the joint angles ``q`` (swing, boom's
-    alpha, arm, bucket), as lists; None for a posture with an angle missing."""
-    if q is None or any(v is None for v in q):
-        return None
-    return {k: [float(c) for c in v] for k, v in excavator.forward_kinematics(np.asarray(q, float)).items()}
+# -- one run, one live frame, for the machine of one joint or four -------------------------------
+# What differs between the boom and the excavator is the mechanism's drawing: its joints, the
+# posture's quantities (one number each, or one per joint), the points it draws from, its scene,
+# its forces (the piston's, scalar; or the tip's, 3-vectors) and the frame's ``kind`` (the boom's
+# frame has none: the page's default).  :class:`Run`, :func:`load_run` and :func:`live_frame`
+# are the same code for both.
+
+def _missing(path, message: str, column: str):
+    from ..recording import RecordingError
+    return RecordingError(path, message, row=1, column=column)
 
 
-def excavator_scene(angle_map=None) -> dict:
-    """The fixed parts of the excavator's drawing: its joints, each cylinder's bore and
-    rod [m], the links' lengths, the ground's height (z = 0), the tip force's arrow
-    scale and how the drawn angles map to the recording's (:func:`excavator_angle_map`)."""
-    params = excavator.excavator_parameters()
-    cylinders = {j: {"bore": a.bore, "rod": a.rod} for j, a in zip(excavator.JOINTS, params.actuators)}
-    return {"kind": "excavator", "joints": list(excavator.JOINTS), "cylinders": cylinders, "ground_z": 0.0,
-            "force_scale": TIP_FORCE_SCALE,
-            "angle_map": angle_map if angle_map is not None else excavator_angle_map()}
+@dataclass(frozen=True)
+class BoomMechanism:
+    """The boom's load (Eq. 8 to 12) as the view draws it: one joint, its angle ``alpha``
+    and piston position ``x``, the points R and T of ``physics.linkage_points``, the
+    piston's forces FORCES."""
+    geom: Geometry = Geometry()
+    L: float = reference_rig.L
+
+    kind = "boom"
+    joints = ("boom",)
+    truth = "f_ext"
+
+    def head(self, t: float) -> dict:
+        return {"type": "frame", "t": t}
+
+    def scene(self) -> dict:
+        """The fixed parts of the drawing [m]: the pivots O and C, the stroke, the
+        cylinder's body and rod lengths and bore, the bucket tip's distance from O."""
+        geom, L = self.geom, self.L
+        C, _ = linkage_points(0.0, geom)
+        return {"O": [0.0, 0.0], "C": [C[0], C[1]], "a": geom.a, "b": geom.b, "h": geom.h,
+                "l_min": geom.l_min, "L": L, "r_tip": TIP_OVER_B * geom.b,
+                "body_length": geom.l_min - 0.02, "rod_length": L + 0.03,
+                "bore": reference_rig.bore, "rod": reference_rig.rod}
+
+    def points(self, alpha: float | None) -> dict:
+        """The moving pivots for a boom angle: R (the rod's) and T (the bucket's tip, on
+        the ray O->R at TIP_OVER_B * b from O)."""
+        if alpha is None:
+            return {"R": None, "T": None}
+        _, R = linkage_points(alpha, self.geom)
+        return {"R": [float(R[0]), float(R[1])], "T": [float(TIP_OVER_B * R[0]), float(TIP_OVER_B * R[1])]}
+
+    def posture(self, values: dict) -> dict:
+        """A posture from its POSTURE values (the frame's ``machine`` or ``model``)."""
+        return dict(values, **self.points(values["alpha"]))
+
+    def columns(self, rec, d: pd.DataFrame, suffix: str) -> dict:
+        cols = {k: d[k + suffix].to_numpy(float) for k in ("alpha", "p_a", "p_b")}
+        x = d.get("x" + suffix)
+        cols["x"] = x.to_numpy(float) if x is not None else np.asarray(x_from_alpha(cols["alpha"], self.geom))
+        return {k: cols[k] for k in POSTURE}
+
+    def has_model(self, d: pd.DataFrame) -> bool:
+        return "alpha_measured" in d
+
+    def forces(self, rec, d: pd.DataFrame) -> dict:
+        return {k: d[k].to_numpy(float) for k in FORCES if k in d}
+
+    def frame_forces(self, at, forces: dict) -> dict:
+        return {k: (at(forces[k]) if k in forces else None) for k in FORCES}
+
+    def live_posture(self, sample: dict, suffix: str) -> dict | None:
+        alpha = sample.get("alpha" + suffix)
+        if alpha is None:
+            return None
+        x = sample.get("x" + suffix)
+        return self.posture({"alpha": float(alpha),
+                             "x": float(x) if x is not None else float(x_from_alpha(alpha, self.geom)),
+                             "p_a": sample.get("p_a" + suffix), "p_b": sample.get("p_b" + suffix)})
+
+    def live_forces(self, sample: dict) -> dict:
+        return {k: sample.get(k) for k in FORCES}
+
+    live_missing = "a live sample needs alpha or alpha_measured"
+
+
+@dataclass(frozen=True)
+class LinkageMechanism:
+    """The excavator's linkage as the view draws it: the joints ``excavator.JOINTS``,
+    each one's angle and pressures, the points of ``physics.excavator.forward_kinematics``,
+    the tip's forces TIP_FORCES and their interval TIP_BOUNDS; ``angle_map`` as
+    :func:`excavator_angle_map` (None: found at mid-stroke)."""
+    angle_map: list | None = None
+
+    kind = "excavator"
+    joints = excavator.JOINTS
+    truth = "f_tip"
+
+    def head(self, t: float) -> dict:
+        return {"type": "frame", "kind": "excavator", "t": t}
+
+    def scene(self) -> dict:
+        """The fixed parts of the excavator's drawing: its joints, each cylinder's bore
+        and rod [m], the ground's height (z = 0), the tip force's arrow scale and how the
+        drawn angles map to the recording's (:func:`excavator_angle_map`)."""
+        params = excavator.excavator_parameters()
+        cylinders = {j: {"bore": a.bore, "rod": a.rod} for j, a in zip(self.joints, params.actuators)}
+        return {"kind": "excavator", "joints": list(self.joints), "cylinders": cylinders, "ground_z": 0.0,
+                "force_scale": TIP_FORCE_SCALE,
+                "angle_map": self.angle_map if self.angle_map is not None else excavator_angle_map()}
+
+    def points(self, q) -> dict | None:
+        """The drawing's points [m, world frame] for the joint angles ``q`` (swing, boom's
+        alpha, arm, bucket), as lists; None for a posture with an angle missing."""
+        if q is None or any(v is None for v in q):
+            return None
+        return {k: [float(c) for c in v] for k, v in excavator.forward_kinematics(np.asarray(q, float)).items()}
+
+    def posture(self, values: dict) -> dict:
+        """A posture from its EXCAVATOR_POSTURE values, each a list in joint order."""
+        out = {k: dict(zip(self.joints, values[k])) for k in EXCAVATOR_POSTURE}
+        return dict(out, points=self.points(list(out["angle"].values())))
+
+    def columns(self, rec, d: pd.DataFrame, suffix: str) -> dict:
+        missing = [f"{k}_{j}{suffix}" for k in EXCAVATOR_POSTURE for j in self.joints if f"{k}_{j}{suffix}" not in d]
+        if missing:
+            raise _missing(rec.path, "a run with the machine's columns (_measured) beside the model's needs "
+                                     "every joint's angle, p_a and p_b of both", missing[0])
+        return {k: np.column_stack([d[f"{k}_{j}{suffix}"].to_numpy(float) for j in self.joints])
+                for k in EXCAVATOR_POSTURE}
+
+    def has_model(self, d: pd.DataFrame) -> bool:
+        return any(f"angle_{j}_measured" in d for j in self.joints)
+
+    def forces(self, rec, d: pd.DataFrame) -> dict:
+        forces = {}
+        for key, prefix in {**TIP_FORCES, **TIP_BOUNDS}.items():
+            cols = [f"{prefix}_{a}" for a in "xyz"]
+            present = [c for c in cols if c in d]
+            if present and len(present) < 3:
+                raise _missing(rec.path, f"a tip force needs all three of {', '.join(cols)}",
+                               next(c for c in cols if c not in d))
+            if present:
+                vals = np.column_stack([d[c].to_numpy() for c in cols])
+                if vals.dtype.kind not in "fiu":
+                    raise _missing(rec.path, "a tip force must be numbers", cols[0])
+                forces[key] = vals.astype(float)
+                if key in TIP_BOUNDS:                 # an open side: no bound to draw
+                    forces[key][np.abs(forces[key]) >= F_BOUND] = np.nan
+        return forces
+
+    def frame_forces(self, at, forces: dict) -> dict:
+        out = {k: (at(forces[k]) if k in forces else None) for k in TIP_FORCES}
+        for k, v in out.items():
+            if v is not None and any(c is None for c in v):
+                out[k] = None
+        out.update({k: (at(forces[k]) if k in forces else None) for k in TIP_BOUNDS})
+        return out
+
+    def live_posture(self, sample: dict, suffix: str) -> dict | None:
+        q = [sample.get(f"angle_{j}{suffix}") for j in self.joints]
+        if any(v is None for v in q):
+            return None
+        out = {k: {j: sample.get(f"{k}_{j}{suffix}") for j in self.joints} for k in EXCAVATOR_POSTURE}
+        return dict(out, points=self.points(q))
+
+    def live_forces(self, sample: dict) -> dict:
+        forces = {}
+        for key, prefix in TIP_FORCES.items():
+            v = [sample.get(f"{prefix}_{a}") for a in "xyz"]
+            forces[key] = None if any(c is None for c in v) else [float(c) for c in v]
+        for key, prefix in TIP_BOUNDS.items():                 # per axis; an open side None
+            v = [sample.get(f"{prefix}_{a}") for a in "xyz"]
+            forces[key] = (None if all(c is None for c in v) else
+                           [float(c) if c is not None and abs(float(c)) < F_BOUND else None for c in v])
+        return forces
+
+    live_missing = "a live excavator sample needs every joint's angle (angle_<joint> or angle_<joint>_measured)"
+
+
+def mechanism_of(machine) -> "BoomMechanism | LinkageMechanism":
+    """The view's drawing of a ``model.machine.Machine``: the boom's load (the machine of
+    one joint, its model's geometry and stroke) or the excavator's linkage."""
+    if machine.mechanism == "boom":
+        return BoomMechanism(machine.model.geometry, machine.model.cylinder.L)
+    return LinkageMechanism()
 
 
 @dataclass
-class ExcavatorRun:
-    """An excavator run's columns as arrays: ``machine`` and ``model`` map
-    EXCAVATOR_POSTURE names to (n, 4) arrays in ``excavator.JOINTS`` order (``model`` is
-    None for a recording of the machine alone); ``forces`` maps the TIP_FORCES present
-    to (n, 3) arrays, and the TIP_BOUNDS present (an open side nan)."""
+class Run:
+    """A run's columns as arrays, for the machine of one joint or four (``mechanism``):
+    ``machine`` and ``model`` map the posture's quantities to arrays (one column, or
+    (n, joints) in the joints' order; ``model`` is None for a recording of the machine
+    alone); ``forces`` maps the forces present (the tip's interval with an open side nan)."""
     path: Path
     t: np.ndarray
     machine: dict
     model: dict | None
     forces: dict
-    angle_map: list
+    mechanism: "BoomMechanism | LinkageMechanism"
 
-    kind = "excavator"
+    @property
+    def kind(self) -> str:
+        return self.mechanism.kind
 
     @property
     def duration(self) -> float:
@@ -308,10 +341,10 @@ class ExcavatorRun:
 
     @property
     def has_truth(self) -> bool:
-        return "f_tip" in self.forces
+        return self.mechanism.truth in self.forces
 
     def scene(self) -> dict:
-        return excavator_scene(self.angle_map)
+        return self.mechanism.scene()
 
     def frame(self, t: float) -> dict:
         """The frame at time ``t`` [s]: linear interpolation between samples (exact at
@@ -320,100 +353,68 @@ class ExcavatorRun:
         i = min(max(int(np.searchsorted(self.t, t, side="right")) - 1, 0), len(self.t) - 1)
         w = (t - self.t[i]) / (self.t[i + 1] - self.t[i]) if i < len(self.t) - 1 and self.t[i + 1] > self.t[i] else 0.0
 
-        def at(col: np.ndarray) -> list:
+        def at(col: np.ndarray):
             v = col[i] if w == 0.0 else col[i] + w * (col[i + 1] - col[i])
-            return [float(x) if math.isfinite(x) else None for x in v]
+            if np.ndim(v):
+                return [float(x) if math.isfinite(x) else None for x in v]
+            return float(v) if math.isfinite(v) else None
+
+        mech = self.mechanism
 
         def posture(cols: dict) -> dict:
-            out = {k: dict(zip(excavator.JOINTS, at(cols[k]))) for k in EXCAVATOR_POSTURE}
-            return dict(out, points=excavator_points(list(out["angle"].values())))
+            return mech.posture({k: at(c) for k, c in cols.items()})
 
-        forces = {k: (at(self.forces[k]) if k in self.forces else None) for k in TIP_FORCES}
-        for k, v in forces.items():
-            if v is not None and any(c is None for c in v):
-                forces[k] = None
-        forces.update({k: (at(self.forces[k]) if k in self.forces else None) for k in TIP_BOUNDS})
-        return {"type": "frame", "kind": "excavator", "t": t, "machine": posture(self.machine),
-                "model": posture(self.model) if self.model is not None else None, **forces}
+        return {**mech.head(t), "machine": posture(self.machine),
+                "model": posture(self.model) if self.model is not None else None,
+                **mech.frame_forces(at, self.forces)}
 
     def history(self, t: float, window: float = 10.0, rate: float = 30.0) -> list[dict]:
-        """Frames over the ``window`` seconds before ``t``, ``rate`` per second."""
+        """Frames over the ``window`` seconds before ``t``, ``rate`` per second, for the
+        page's plots after a seek or a (re)connection."""
         start = max(float(self.t[0]), t - window)
         n = int((t - start) * rate)
         return [self.frame(start + k / rate) for k in range(n)] + [self.frame(t)]
 
 
-def load_excavator_run(rec) -> ExcavatorRun:
-    """An excavator run from its read recording (``recording.read_recording``)."""
+def load_run(path) -> Run:
+    """Read a run file (see the module's text), the boom's or the excavator's (the
+    recording's kind); raises RecordingError naming the file, line and column of anything
+    malformed."""
+    rec = read_recording(path)
     d: pd.DataFrame = rec.data
-    joints = excavator.JOINTS
-
-    def posture(suffix: str) -> dict:
-        missing = [f"{k}_{j}{suffix}" for k in EXCAVATOR_POSTURE for j in joints if f"{k}_{j}{suffix}" not in d]
-        if missing:
-            from ..recording import RecordingError
-            raise RecordingError(rec.path, "a run with the machine's columns (_measured) beside the model's needs "
-                                           "every joint's angle, p_a and p_b of both", row=1, column=missing[0])
-        return {k: np.column_stack([d[f"{k}_{j}{suffix}"].to_numpy(float) for j in joints])
-                for k in EXCAVATOR_POSTURE}
-
-    if any(f"angle_{j}_measured" in d for j in joints):
-        machine, model = posture("_measured"), posture("")
+    if rec.kind == "excavator":
+        mech = LinkageMechanism()
     else:
-        machine, model = posture(""), None
-    forces = {}
-    for key, prefix in {**TIP_FORCES, **TIP_BOUNDS}.items():
-        cols = [f"{prefix}_{a}" for a in "xyz"]
-        present = [c for c in cols if c in d]
-        if present and len(present) < 3:
-            from ..recording import RecordingError
-            raise RecordingError(rec.path, f"a tip force needs all three of {', '.join(cols)}", row=1,
-                                 column=next(c for c in cols if c not in d))
-        if present:
-            vals = np.column_stack([d[c].to_numpy() for c in cols])
-            if vals.dtype.kind not in "fiu":
-                from ..recording import RecordingError
-                raise RecordingError(rec.path, "a tip force must be numbers", row=1, column=cols[0])
-            forces[key] = vals.astype(float)
-            if key in TIP_BOUNDS:                 # an open side: no bound to draw
-                forces[key][np.abs(forces[key]) >= F_BOUND] = np.nan
-    q0 = machine["angle"][0]
-    try:
-        angle_map = excavator_angle_map(q0)
-    except ValueError:
-        angle_map = excavator_angle_map()
-    return ExcavatorRun(Path(rec.path), d["t"].to_numpy(float), machine, model, forces, angle_map)
+        mech = BoomMechanism(rec.rig_tuple(Geometry), rec.rig_tuple(Cylinder).L)
+    if mech.has_model(d):
+        machine, model = mech.columns(rec, d, "_measured"), mech.columns(rec, d, "")
+    else:
+        machine, model = mech.columns(rec, d, ""), None
+    forces = mech.forces(rec, d)
+    if isinstance(mech, LinkageMechanism):      # the drawn angles, found at the run's first posture
+        try:
+            mech = LinkageMechanism(excavator_angle_map(machine["angle"][0]))
+        except ValueError:
+            mech = LinkageMechanism(excavator_angle_map())
+    return Run(Path(path), d["t"].to_numpy(float), machine, model, forces, mech)
 
 
-def live_excavator_frame(sample: dict) -> dict:
-    """A frame from one live excavator sample (``angle_<j>``, ``p_a_<j>``... of the
-    model, ``..._measured`` of the machine, ``f_tip_<a>``, ``f_tip_est_<a>``,
-    ``f_reflect_<a>``); a sample without the machine's columns shows the model as the
-    machine."""
-    joints = excavator.JOINTS
-
-    def posture(suffix: str) -> dict | None:
-        q = [sample.get(f"angle_{j}{suffix}") for j in joints]
-        if any(v is None for v in q):
-            return None
-        out = {k: {j: sample.get(f"{k}_{j}{suffix}") for j in joints} for k in EXCAVATOR_POSTURE}
-        return dict(out, points=excavator_points(q))
-
-    machine, model = posture("_measured"), posture("")
+def live_frame(sample: dict, geom: Geometry) -> dict:
+    """A frame from one live sample: the flat mapping a co-simulation sends
+    (``view.live.LiveSender``): ``t``, the model's ``alpha, x, p_a, p_b`` (an
+    excavator's: ``angle_<joint>``, ``p_a_<joint>``...), the machine's the same suffixed
+    ``_measured``, and whichever forces it has (an excavator's: ``f_tip_<a>``,
+    ``f_tip_est_<a>``, ``f_reflect_<a>``, ``f_tip_lo/hi_<a>``).  A sample without the
+    machine's columns shows the model as the machine (a model-only run).  ``geom`` is the
+    boom's (an excavator's sample has none)."""
+    mech = LinkageMechanism() if is_excavator_sample(sample) else BoomMechanism(geom)
+    machine, model = mech.live_posture(sample, "_measured"), mech.live_posture(sample, "")
     if machine is None:
         machine, model = model, None
     if machine is None:
-        raise ValueError("a live excavator sample needs every joint's angle (angle_<joint> or angle_<joint>_measured)")
-    forces = {}
-    for key, prefix in TIP_FORCES.items():
-        v = [sample.get(f"{prefix}_{a}") for a in "xyz"]
-        forces[key] = None if any(c is None for c in v) else [float(c) for c in v]
-    for key, prefix in TIP_BOUNDS.items():                 # per axis; an open side None
-        v = [sample.get(f"{prefix}_{a}") for a in "xyz"]
-        forces[key] = (None if all(c is None for c in v) else
-                       [float(c) if c is not None and abs(float(c)) < F_BOUND else None for c in v])
-    return {"type": "frame", "kind": "excavator", "t": float(sample.get("t", 0.0)), "machine": machine,
-            "model": model, **forces}
+        raise ValueError(mech.live_missing)
+    return {**mech.head(float(sample.get("t", 0.0))), "machine": machine, "model": model,
+            **mech.live_forces(sample)}
 
 
 def is_excavator_sample(sample: dict) -> bool:
@@ -421,5 +422,4 @@ def is_excavator_sample(sample: dict) -> bool:
     return any(f"angle_{j}{s}" in sample for j in excavator.JOINTS for s in ("", "_measured"))
 
 
-__all__ = ["Run", "ExcavatorRun", "load_run", "live_frame", "scene", "excavator_scene", "points",
-           "excavator_points"]
+__all__ = ["Run", "BoomMechanism", "LinkageMechanism", "mechanism_of", "load_run", "live_frame"]

@@ -9,8 +9,8 @@ percent-encoding) a 400.  ``GET /ws`` is the WebSocket; messages are JSON:
 
 server -> page
     ``{"type": "hello", "mode": "replay" | "live", "source": str, "t0": s,
-    "duration": s or null, "scene": frames.scene() (the boom's) or
-    frames.excavator_scene() (``"kind": "excavator"``), "has_model": bool,
+    "duration": s or null, "scene": the run's mechanism's (``frames.BoomMechanism.scene``, or
+    ``frames.LinkageMechanism.scene`` with ``"kind": "excavator"``), "has_model": bool,
     "has_truth": bool, "rate": frames per second}``, then
     ``{"type": "history", "frames": [...]}`` (the last 10 s, for the plots), then
     ``{"type": "frame", ...}`` (``frames.py``) at ``rate`` per second while playing,
@@ -63,7 +63,7 @@ from ..link.client import parse_address
 from ..link.protocol import load_key
 from ..physics import Geometry
 from ..physics import reference_rig
-from .frames import Run, excavator_scene, live_frame, load_run, scene
+from .frames import BoomMechanism, LinkageMechanism, Run, live_frame, load_run
 from .live import FeedGuard, Refused, json_depth, open_datagram, strict_loads
 
 WEB = Path(__file__).resolve().parent / "web"
@@ -519,8 +519,8 @@ class LiveHub(asyncio.DatagramProtocol):
 
     def hello(self) -> str:
         last = self.history[-1] if self.history else None
-        the_scene = excavator_scene() if self.kind == "excavator" else scene(self.geom, reference_rig.L)
-        truth = "f_tip" if self.kind == "excavator" else "f_ext"
+        mech = LinkageMechanism() if self.kind == "excavator" else BoomMechanism(self.geom, reference_rig.L)
+        the_scene, truth = mech.scene(), mech.truth
         return _hello("live", self.source, last["t"] if last else 0.0, None, the_scene,
                       bool(last and last["model"] is not None), bool(last and last.get(truth) is not None))
 
