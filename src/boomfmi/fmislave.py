@@ -195,6 +195,25 @@ def _are(items, noun: str) -> str:
 _TYPES = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
 
 
+def _hold_script_globals(cls) -> None:
+    """Take one more reference to the globals of the FMU script that defines ``cls``
+    (called as the script's class is created; not for the library's own subclasses).
+
+    pythonfmu's ``findClass`` (run once per fmi2Instantiate) re-executes the script in
+    its module's globals, which creates the class again, and then releases that
+    dictionary once more than it took it.  A script whose functions hold its globals
+    (methods defined in it) hides this for a while; a script that declares no methods
+    (a bridge: its behaviour is all in ``rigbridge``) had its module's globals freed by
+    the first instantiation, and the second crashed the host.  The reference taken here
+    at each creation balances the release (one reference too many, held for the
+    process's life)."""
+    import ctypes
+    module = sys.modules.get(cls.__module__)
+    library = __name__.rpartition(".")[0]
+    if module is not None and not cls.__module__.startswith(library + "."):
+        ctypes.pythonapi.Py_IncRef(ctypes.py_object(module.__dict__))
+
+
 class BoomSlave(_FmiSlave):
     """Base of the boomfmi FMUs.
 
@@ -205,6 +224,10 @@ class BoomSlave(_FmiSlave):
     author = "boomfmi"
     license = "MIT"
     variables: Tuple[Variable, ...] = ()
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        _hold_script_globals(cls)
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)

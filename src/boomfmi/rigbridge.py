@@ -138,25 +138,6 @@ def bridge_variables(machine: str):
             *(rig_parameters(*GEOMETRY) if boom else ()), *sensor_options())
 
 
-def _hold_script_globals(cls) -> None:
-    """Take one more reference to the globals of the FMU script that defines ``cls``
-    (called as the script's class is created).
-
-    pythonfmu's ``findClass`` (run once per fmi2Instantiate) re-executes the script in
-    its module's globals, which creates the class again, and then releases that
-    dictionary once more than it took it.  A script whose functions hold its globals
-    (methods defined in it) hides this for a few instances; a bridge script declares no
-    methods (its behaviour is all here), so without this its module's globals would be
-    freed by the first instantiation and the second would crash.  The reference taken
-    here at each creation balances the release (one reference too many, held for the
-    process's life)."""
-    import ctypes
-    import sys
-    module = sys.modules.get(cls.__module__)
-    if module is not None and cls.__module__ != __name__:
-        ctypes.pythonapi.Py_IncRef(ctypes.py_object(module.__dict__))
-
-
 class RigBridge(BoomSlave):
     """A bridge FMU's behaviour (see the module's docstring).  A bridge's script sets
     ``MACHINE`` (a key of :data:`MACHINES`: ``"boom"``, ``"excavator"``), its
@@ -179,7 +160,6 @@ class RigBridge(BoomSlave):
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
-        _hold_script_globals(cls)
         cls.KIND = cls.MACHINE
         cls.MEASURED, cls.EXTRA, cls.COMMANDS = channels(cls.MACHINE)
 
