@@ -28,7 +28,7 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from boomfmi.experiments import digging_cycle  # noqa: E402
 from boomfmi.model.reference import simulate_excavator_reference  # noqa: E402
-from boomfmi.physics.excavator import JOINTS  # noqa: E402
+from boomfmi.physics.linkage import JOINTS  # noqa: E402
 from boomfmi.system import simulate_ssp  # noqa: E402
 
 SECTION = "## The whole excavator"

@@ -8,7 +8,7 @@ any force up to ``F_s scale`` without the joint moving (so without the pressures
 angles changing); one pressed on an end stop does not feel a force towards the stop at
 all.  Every tip force that keeps every joint's motion as recorded therefore gives the
 very same recording.  At each contact sample the script runs the rig's exact states and
-pressures (no noise, no ADC) through the linkage (``physics.excavator.piston_dynamics``)
+pressures (no noise, no ADC) through the linkage (``physics.linkage.piston_dynamics``)
 and collects, per joint, what the tip force must satisfy::
 
     sliding:          lam_i (J^T f)_i = g0_i + K_v v_i + F_d scale_i sign(v_i)   (within --tol)
@@ -32,7 +32,7 @@ import numpy as np
 from scipy.optimize import linprog
 
 from boomfmi import experiments as E
-from boomfmi.physics import excavator as exc
+from boomfmi.physics import linkage as exc
 from boomfmi.rig import run_excavator_offline
 
 EXACT = {"p_sigma": 0.0, "alpha_sigma": 0.0, "quantise": False}

@@ -127,7 +127,7 @@ def test_the_digging_cycle_takes_the_tip_into_the_soil():
     """Pistons driven at a speed in proportion to their valve's opening from mid-stroke
     (a kinematic stand-in for the rig): the tip goes below the soil's surface in the
     boom-down and arm-in phases only, and comes out above it to dump."""
-    from boomfmi.physics.excavator import excavator_parameters, forward_kinematics, joint_angles
+    from boomfmi.physics.linkage import excavator_parameters, forward_kinematics, joint_angles
     p, ex = digging_cycle(), excavator_parameters()
     t = np.arange(0.0, p.duration, 2e-3)
     x, xs = 0.5 * ex.strokes, []
@@ -170,5 +170,5 @@ def test_a_bad_contact_description_is_refused(kwargs, message):
 
 def test_the_joints_are_the_linkage_s_and_the_recording_s():
     from boomfmi import recording
-    from boomfmi.physics import excavator
-    assert JOINTS == excavator.JOINTS == recording.JOINTS
+    from boomfmi.physics import linkage
+    assert JOINTS == linkage.JOINTS == recording.JOINTS

@@ -131,7 +131,7 @@ def _observer(d):
     """estimate_tip_force's loop (its defaults), run once for both its answers: the
     least-squares estimate, and per sample the informative joints' estimate (nan where
     undetermined), their number and the determined components (finite ``state["f_known"]``)."""
-    from boomfmi.physics.excavator import JOINTS, Excavator
+    from boomfmi.physics.linkage import JOINTS, Excavator
     from boomfmi.physics.force_estimation import F_MOTION, F_MOTION_SWING, observer_start, observer_step
     P = Excavator().P_atm
     Q = d[[f"angle_{j}" for j in JOINTS]].to_numpy()
@@ -194,7 +194,7 @@ def test_tip_force_silent_while_the_angle_sensors_toggle_at_rest():
     Through the fast filter each flip reads as an acceleration of about a metre per
     second squared (at the swing's crank, hundreds of newtons); the observer counts a
     joint that is not sliding by both filters as at rest, with no acceleration."""
-    from boomfmi.physics.excavator import JOINTS, Excavator, joint_angles
+    from boomfmi.physics.linkage import JOINTS, Excavator, joint_angles
     from boomfmi.rig import holding_pressures
     ex = Excavator()
     x = 0.5 * np.asarray(ex.strokes)

@@ -16,7 +16,7 @@ import pytest
 
 from boomfmi.experiments import held_joints
 from boomfmi.link import protocol as p
-from boomfmi.physics.excavator import Excavator, joint_angles, lever_arms, tip_jacobian, tip_position
+from boomfmi.physics.linkage import Excavator, joint_angles, lever_arms, tip_jacobian, tip_position
 from boomfmi.recording import read_recording, recording_kind
 from boomfmi.rig import config_machine, make_rig
 from boomfmi.rig.config import load_excavator_config

@@ -15,8 +15,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from boomfmi.physics import excavator as exc
-from boomfmi.physics.excavator import JOINTS
+from boomfmi.physics import linkage as exc
+from boomfmi.physics.linkage import JOINTS
 from boomfmi.system import CoSimulation, simulate_ssp
 from boomfmi.system.ssv import NS, SspError, read_ssv
 

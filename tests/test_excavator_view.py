@@ -7,7 +7,7 @@ and the page live beside ``boomfmi simulate build/excavator.ssp --view``.
 
 The run file is, for now, a *kinematic* trajectory: each piston driven at a speed in
 proportion to its valve's opening in the digging cycle (``experiments.digging_cycle``),
-its joint angles from ``physics.excavator.joint_angles``, the pressures constant, the
+its joint angles from ``physics.linkage.joint_angles``, the pressures constant, the
 soft soil's force (``experiments.contact("soft_soil")``) at the tip as the truth and a
 scaled, lagging copy as the estimate; the model's ghost is the same trajectory a little
 slower.  It will switch to a recording of the excavator rig (through the excavator's
@@ -26,11 +26,11 @@ import pandas as pd
 import pytest
 
 from boomfmi.experiments import contact, digging_cycle
-from boomfmi.physics import excavator
+from boomfmi.physics import linkage
 from boomfmi.recording import write_recording
 from boomfmi.view.frames import excavator_angle_map, live_frame, load_run
 
-JOINTS = excavator.JOINTS
+JOINTS = linkage.JOINTS
 KEY = b"excavator-view-test-key-0123456789"
 ROOT = Path(__file__).resolve().parents[1]
 ARTIFACTS = ROOT / "build" / "test-artifacts"
@@ -40,7 +40,7 @@ DT = 2e-3
 def kinematic_run(speed: float = 0.03, lag: int = 0) -> pd.DataFrame:
     """The digging cycle's kinematics: piston speeds ``speed * (5 V - u)`` [m/s] from
     mid-stroke, clipped to the strokes, every ``DT`` [s]."""
-    p, ex = digging_cycle(), excavator.excavator_parameters()
+    p, ex = digging_cycle(), linkage.excavator_parameters()
     t = np.arange(0.0, p.duration, DT)
     x, xs, us = 0.5 * ex.strokes, [], []
     for s in t:
@@ -49,14 +49,14 @@ def kinematic_run(speed: float = 0.03, lag: int = 0) -> pd.DataFrame:
         x = np.clip(x + speed * np.array([5.0 - c for c in us[-1]]) * DT, 0.0, ex.strokes)
         xs.append(x)
     xs = np.array(xs)
-    q = excavator.joint_angles(xs)
+    q = linkage.joint_angles(xs)
     d = {"t": t}
     for k, j in enumerate(JOINTS):
         d[f"u_{j}"] = np.array(us)[:, k]
         d[f"p_a_{j}"] = np.full(len(t), 2.0e5 + 1e4 * k)
         d[f"p_b_{j}"] = np.full(len(t), 3.0e5 - 1e4 * k)
         d[f"angle_{j}"] = q[:, k]
-    tip = excavator.forward_kinematics(q)["tip"]
+    tip = linkage.forward_kinematics(q)["tip"]
     vel = np.gradient(tip, DT, axis=0)
     soil = contact("soft_soil")
     f = np.array([soil.force(s, r, v) for s, r, v in zip(t, tip, vel)])
@@ -101,7 +101,7 @@ def test_frames_carry_the_recording_s_angles_and_the_linkage_s_points(runs):
         assert f["kind"] == "excavator"
         assert [f["machine"]["angle"][j] for j in JOINTS] == pytest.approx(q, abs=1e-12)
         assert [f["model"]["angle"][j] for j in JOINTS] == pytest.approx([d[f"angle_{j}"][k] for j in JOINTS])
-        assert f["machine"]["points"]["tip"] == pytest.approx(excavator.forward_kinematics(np.array(q))["tip"])
+        assert f["machine"]["points"]["tip"] == pytest.approx(linkage.forward_kinematics(np.array(q))["tip"])
         assert f["f_tip_est"] == pytest.approx([d[f"f_tip_est_{a}"][k] for a in "xyz"], abs=1e-9)
         assert f["f_tip"] == pytest.approx([d[f"f_tip_{a}"][k] for a in "xyz"], abs=1e-9)
     mid = run.frame(0.5 * (d["t"][10] + d["t"][11]))
@@ -121,7 +121,7 @@ def test_a_recording_of_the_machine_alone_has_no_ghost(runs):
 def test_the_drawn_angles_map_to_the_recording_s(q):
     """The angle map the page reads its drawn angles back with is the kinematics'."""
     from boomfmi.view.frames import _angles_of_points, _wrap
-    drawn = _angles_of_points(excavator.forward_kinematics(np.array(q)))
+    drawn = _angles_of_points(linkage.forward_kinematics(np.array(q)))
     back = [m["sign"] * float(_wrap(drawn[k] - m["offset"])) for k, m in enumerate(excavator_angle_map())]
     assert back == pytest.approx(q, abs=1e-9)
 
@@ -164,7 +164,7 @@ def test_the_export_draws_the_recording_s_angles_and_the_tip_forces(runs):
         drawing.show(tc)
         at = lambda col: float(np.interp(tc, d["t"], d[col]))
         for lines, suffix in ((drawing.machine, "_measured"), (drawing.ghost, "")):
-            fk = excavator.forward_kinematics(np.array([at(f"angle_{j}{suffix}") for j in JOINTS]))
+            fk = linkage.forward_kinematics(np.array([at(f"angle_{j}{suffix}") for j in JOINTS]))
             for (_, k), view in zip(drawing.views, lines):
                 for name, a, b, _ in EXCAVATOR_LINKS:
                     xs, ys = view[name].get_data()
@@ -225,7 +225,7 @@ def test_live_excavator_samples_reach_the_hub_as_frames():
     assert f["machine"]["p_a"]["arm"] == pytest.approx(2e5) and f["machine"]["p_a"]["boom"] is None
     assert f["f_tip_est"] == [3.0, -1.0, 20.0] and f["f_tip"] is None
     assert f["machine"]["points"]["tip"] == pytest.approx(
-        excavator.forward_kinematics(np.array(q) + 0.01)["tip"])
+        linkage.forward_kinematics(np.array(q) + 0.01)["tip"])
 
 
 def test_a_live_excavator_sample_missing_a_joint_is_refused():

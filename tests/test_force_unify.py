@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from boomfmi.physics import excavator as exc
+from boomfmi.physics import linkage as exc
 from boomfmi.physics import force_estimation as fe
 from boomfmi.physics.geometry import phi_from_x
 from boomfmi.physics.params import Cylinder, Geometry, Load

@@ -13,7 +13,7 @@ from boomfmi import experiments as E
 from boomfmi.diagnose import joint_load as jl
 from boomfmi.identify.preprocess import ABS_FLOOR, NOISE_FACTOR
 from boomfmi.model import EFFECTS
-from boomfmi.physics.excavator import JOINTS, Excavator
+from boomfmi.physics.linkage import JOINTS, Excavator
 from boomfmi.rig import run_excavator_offline
 
 EXCITATION = 8.0      # s of excavator_excitation: every joint moves in it

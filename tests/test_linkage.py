@@ -1,4 +1,4 @@
-"""The whole excavator's linkage (physics/excavator.py) and its FMU: closed-form checks.
+"""The whole excavator's linkage (physics/linkage.py) and its FMU: closed-form checks.
 
 Static equilibrium against a hand computation, energy conservation without friction, the
 Jacobian, the lever arms and the joint maps against finite differences, the mass matrix,
@@ -22,7 +22,7 @@ from boomfmi.physics import (JOINTS, ParameterError, advance_linkage, advance_lo
                              joint_limits, kinetic_energy, lever_arms, lumped_boom_load, mass_matrix,
                              phi_from_x, piston_accelerations, pistons_from_angles, potential_energy,
                              tip_jacobian)
-from boomfmi.physics.excavator import cylinder_forces, mass_matrix_derivative, tip_torques
+from boomfmi.physics.linkage import cylinder_forces, mass_matrix_derivative, tip_torques
 
 ROOT = Path(__file__).resolve().parents[1]
 EX = excavator_parameters()

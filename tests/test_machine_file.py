@@ -14,7 +14,7 @@ import pytest
 
 from boomfmi.experiments import random_steps
 from boomfmi.machine import MachineError, machine_document, read_machine
-from boomfmi.physics.excavator import Excavator
+from boomfmi.physics.linkage import Excavator
 from boomfmi.recording import RecordingError, read_recording, read_sidecar, write_recording
 from boomfmi.rig.offline import run_offline
 

@@ -16,7 +16,7 @@ from boomfmi import physics as ph
 from boomfmi.model import Boom, Model, measure
 from boomfmi.model.machine import ExcavatorMachine, friction_hook, joint_fmu_variable
 from boomfmi.model.reference import simulate_excavator_reference
-from boomfmi.physics.excavator import JOINTS, Excavator, advance_linkage, pistons_from_angles
+from boomfmi.physics.linkage import JOINTS, Excavator, advance_linkage, pistons_from_angles
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples" / "rig"

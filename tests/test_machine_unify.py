@@ -14,7 +14,7 @@ from boomfmi.model import Model, fmu_variable
 from boomfmi.model import machine as M
 from boomfmi.model import reference as R
 from boomfmi.physics import ParameterError
-from boomfmi.physics.excavator import JOINTS
+from boomfmi.physics.linkage import JOINTS
 from boomfmi.physics.params import channel
 
 LEAK = {"piston_leakage": {"C": 2e-11}}
@@ -23,6 +23,8 @@ LEAK = {"piston_leakage": {"C": 2e-11}}
 def test_one_machine_class_and_one_reference_module():
     with pytest.raises(ModuleNotFoundError):
         importlib.import_module("boomfmi.model.excavator_reference")
+    with pytest.raises(ModuleNotFoundError):                 # the linkage is physics/linkage.py
+        importlib.import_module("boomfmi.physics.excavator")
     assert M.ExcavatorMachine is M.Machine
     assert R.simulate_excavator_reference is R.simulate_linkage
     assert type(M.excavator_machine()) is type(M.boom_machine(Model())) is M.Machine

@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from boomfmi.model import measure
-from boomfmi.physics.excavator import JOINTS
+from boomfmi.physics.linkage import JOINTS
 from boomfmi.recording import write_recording
 from boomfmi.system import FmuError, FmuInstance
 

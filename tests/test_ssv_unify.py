@@ -12,7 +12,7 @@ from boomfmi.fmubuild import BuildError
 from boomfmi.fmubuild.ssp import machine_parameters, parameters_ssv
 from boomfmi.model.boom import Model
 from boomfmi.model.machine import boom_machine, excavator_machine
-from boomfmi.physics.excavator import JOINTS
+from boomfmi.physics.linkage import JOINTS
 from boomfmi.system.ssv import read_ssv
 
 ROOT = Path(__file__).resolve().parents[1]

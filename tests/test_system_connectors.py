@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from boomfmi.experiments import digging_cycle, paper_multistep
-from boomfmi.physics.excavator import JOINTS
+from boomfmi.physics.linkage import JOINTS
 from boomfmi.system import CoSimulation, fmpy_input, simulate_ssp
 from boomfmi.system.ssp import read_ssp
 

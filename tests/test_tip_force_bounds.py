@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from boomfmi import experiments as E
-from boomfmi.physics import excavator as exc
+from boomfmi.physics import linkage as exc
 from boomfmi.physics.force_estimation import (F_BOUND, estimate_tip_force, joint_force_bands, tip_force_figures,
                                               tip_force_interval)
 from boomfmi.rig import run_excavator_offline

@@ -12,18 +12,18 @@ import pytest
 
 from boomfmi.model.boom import Model
 from boomfmi.model.machine import boom_machine, excavator_machine
-from boomfmi.physics import Geometry, excavator
+from boomfmi.physics import Geometry, linkage
 from boomfmi.recording import write_recording
 from boomfmi.view.frames import BoomMechanism, LinkageMechanism, Run, live_frame, load_run, mechanism_of
 
-JOINTS = excavator.JOINTS
+JOINTS = linkage.JOINTS
 
 
 def _runs(tmp_path):
     t = np.arange(5) * 0.01
     boom = write_recording(tmp_path / "boom.csv", pd.DataFrame(
         {"t": t, "u": 5.0, "p_a": 2e5 + 1e3 * t, "p_b": 3e5, "alpha": 0.8 + 0.5 * t}))
-    q0 = excavator.joint_angles(0.5 * excavator.excavator_parameters().strokes)
+    q0 = linkage.joint_angles(0.5 * linkage.excavator_parameters().strokes)
     d = {"t": t}
     for k, j in enumerate(JOINTS):
         d.update({f"u_{j}": 5.0, f"p_a_{j}": 2e5 + 1e4 * k, f"p_b_{j}": 3e5, f"angle_{j}": q0[k] + 0.2 * t})

@@ -43,7 +43,7 @@ import numpy as np
 
 from boomfmi_excavator_force_estimator_lib.fmislave import BoomSlave, input, output, parameter
 from boomfmi_excavator_force_estimator_lib.physics import reference_rig
-from boomfmi_excavator_force_estimator_lib.physics.excavator import JOINTS, Excavator, check_excavator
+from boomfmi_excavator_force_estimator_lib.physics.linkage import JOINTS, Excavator, check_excavator
 from boomfmi_excavator_force_estimator_lib.physics.force_estimation import (BAND_RATE, BAND_SLIDE, F_BOUND, F_MOTION,
                                                                             F_MOTION_SWING, T_HOLD, observer_start,
                                                                             observer_step, reflected_force)

@@ -4,7 +4,7 @@ Inputs the eight absolute chamber pressures (``p_a_<joint>``, ``p_b_<joint>``) a
 force of the environment on the bucket tip (world frame); outputs each piston's position
 and velocity (its states), each joint's angle (the recording's ``angle_<joint>``: the
 swing angle, the boom's alpha of Eq. 12, the arm's and the bucket's relative angles) and
-the tip's position.  The physics is ``physics/excavator.py`` (``shared/spec/excavator.md``;
+the tip's position.  The physics is ``physics/linkage.py`` (``shared/spec/excavator.md``;
 Eq. 8 to 12 per cylinder): mass matrix, Coriolis and gravity of the four joints, each
 cylinder acting through its lever arm, Eq. 9 friction and hard end stops per cylinder,
 the tip force through the Jacobian transpose.  Within a step the inputs are held and the
@@ -22,7 +22,7 @@ from boomfmi_linkage_lib.fmislave import L_MAX, BoomSlave, effect_options, input
 from boomfmi_linkage_lib.model import Boom, Model, effects_from_options
 from boomfmi_linkage_lib.model.machine import friction_hook
 from boomfmi_linkage_lib.physics import reference_rig
-from boomfmi_linkage_lib.physics.excavator import (JOINTS, LINKS, Excavator, advance_linkage, angles_and_tip,
+from boomfmi_linkage_lib.physics.linkage import (JOINTS, LINKS, Excavator, advance_linkage, angles_and_tip,
                                                    excavator_from_values, excavator_value_names)
 from boomfmi_linkage_lib.physics.validation import ParameterError, require_non_negative
 

@@ -214,7 +214,7 @@ def profile(name: str) -> Callable[[float], dict]:
 
 # -- the whole excavator (shared/spec/excavator.md) ---------------------------------------------
 #: The excavator's joints, each with its own valve: the commands are ``u_<joint>`` [V]
-#: (the linkage's ``physics.excavator.JOINTS``; the recording's ``recording.JOINTS``).
+#: (the linkage's ``physics.linkage.JOINTS``; the recording's ``recording.JOINTS``).
 JOINTS = ("swing", "boom", "arm", "bucket")
 #: The valve's centre [V]: the spool closes both ports (reference-rig.md).
 CENTRE = 5.0

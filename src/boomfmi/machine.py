@@ -32,7 +32,7 @@ from pathlib import Path
 from ._json import read_object
 from .foreign import units
 from .physics import reference_rig
-from .physics.excavator import (ACTUATOR_FIELDS, JOINTS, LINK_FIELDS, LINKS, MACHINE_FIELDS, Excavator,
+from .physics.linkage import (ACTUATOR_FIELDS, JOINTS, LINK_FIELDS, LINKS, MACHINE_FIELDS, Excavator,
                                 excavator_from_values)
 from .recording import (EXCAVATOR_RIG_UNITS, RIG_UNITS, Recording, check_excavator_values, check_rig_values,
                         RecordingError)

@@ -33,7 +33,7 @@ import numpy as np
 
 from ._json import read_object
 from .physics import Cylinder, Geometry, Valve, alpha_from_x, reference_rig
-from .physics.excavator import JOINTS, excavator_from_values, excavator_value_names
+from .physics.linkage import JOINTS, excavator_from_values, excavator_value_names
 from .physics import (Gas, Load, ParameterError, check_cylinder, check_gas, check_geometry, check_load,
                       check_valve)
 from .physics.params import L_MAX
@@ -52,7 +52,7 @@ RIG_UNITS = {"A_max": "m2", "P_s": "Pa", "P_e": "Pa", "k": "1", "R": "J/(kg.K)",
              "A_b": "m2", "L": "m", "V_a0": "m3", "V_b0": "m3", "a": "m", "b": "m", "h": "m", "l_min": "m",
              "K_v": "N.s/m", "F_s": "N", "F_d": "N", "F_L": "N", "M": "kg", "P_atm": "Pa",
              "supply_pressure_gauge": "Pa"}
-#: The whole excavator's values a sidecar may set (``physics.excavator.excavator_from_values``:
+#: The whole excavator's values a sidecar may set (``physics.linkage.excavator_from_values``:
 #: ``<field>_<joint>``, ``<field>_<link>``, h, pivot_forward, pivot_height, P_atm), SI units.
 EXCAVATOR_RIG_KEYS = excavator_value_names()
 _FIELD_UNITS = {"bore": "m", "rod": "m", "stroke": "m", "c1": "m", "c2": "m", "l_min": "m", "lower": "rad",
@@ -61,7 +61,7 @@ _FIELD_UNITS = {"bore": "m", "rod": "m", "stroke": "m", "c1": "m", "c2": "m", "l
                 "P_atm": "Pa"}
 EXCAVATOR_RIG_UNITS = {k: _FIELD_UNITS[k if k in _FIELD_UNITS else k.rsplit("_", 1)[0]] for k in EXCAVATOR_RIG_KEYS}
 OPTIONAL = ("f_ext", "x")
-#: (``JOINTS``, the excavator's joints, are the linkage's: ``physics.excavator.JOINTS``.)
+#: (``JOINTS``, the excavator's joints, are the linkage's: ``physics.linkage.JOINTS``.)
 #: An excavator recording's required columns: t, then each quantity for every joint.
 EXCAVATOR_REQUIRED = ("t",) + tuple(f"{q}_{j}" for q in ("u", "p_a", "p_b", "angle") for j in JOINTS)
 #: Its optional columns: the tip force (world frame) and each piston measured directly.

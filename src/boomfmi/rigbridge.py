@@ -34,7 +34,7 @@ import time
 
 from .fmislave import GEOMETRY, U_MAX, U_MIN, BoomSlave, effect_options, input, output, parameter, rig_parameters
 from .physics import Geometry, check_geometry, reference_rig, x_from_alpha
-from .physics.excavator import JOINTS, Excavator, pistons_from_angles
+from .physics.linkage import JOINTS, Excavator, pistons_from_angles
 from .physics.params import L_MAX
 from .link.client import RigClient, parse_address, wait_until
 from .link.protocol import LinkError, load_key

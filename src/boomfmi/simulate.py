@@ -29,7 +29,7 @@ from .system.master import CoSimulation
 from .system.ssv import Parameter
 
 RECORDED = ("p_a", "p_b", "alpha", "x", "v")
-#: The whole excavator's joints (the linkage's, ``physics.excavator.JOINTS``).
+#: The whole excavator's joints (the linkage's, ``physics.linkage.JOINTS``).
 JOINTS = ph.JOINTS
 
 

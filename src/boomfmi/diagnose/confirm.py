@@ -99,7 +99,7 @@ def machine_parameters(values: dict, effects_by_joint: dict, rec) -> dict:
     ``cylinder_arm.C_leak``, ``linkage.v_s_arm``; sensor_lag is applied to the outputs)."""
     from ..identify.excavator_outputs import START_WINDOW, machine_for, measured_pistons, ssp_name
     from ..model.machine import check_joint_effects, joint_fmu_variable
-    from ..physics.excavator import JOINTS
+    from ..physics.linkage import JOINTS
     ex = machine_for(rec)
     check_joint_effects(effects_by_joint, ex)
     params = {ssp_name(k): float(v) for k, v in values.items()
@@ -128,7 +128,7 @@ def run_machine_fmus(ssp, values: dict, effects_by_joint: dict, rec) -> dict:
     sensor_lag seen through it (its pressures and angle lagged, x from the lagged angle,
     as the excavator's bridge measures)."""
     from ..identify.excavator_outputs import machine_for
-    from ..physics.excavator import JOINTS, pistons_from_angles
+    from ..physics.linkage import JOINTS, pistons_from_angles
     out = run_experiment(ssp, str(rec.path), parameters=[machine_parameters(values, effects_by_joint, rec)])
     t = rec.data["t"].to_numpy(float)
     ts = out["t"].to_numpy(float)

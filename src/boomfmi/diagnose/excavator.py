@@ -66,7 +66,7 @@ import numpy as np
 from ..compare import as_sensed
 from ..identify.preprocess import lowpass
 from ..model import EFFECTS, Boom, Model, measure
-from ..physics import excavator as exc
+from ..physics import linkage as exc
 from .attribute import (ABS_FLOOR, CANDIDATES, FORMS, GROW, GROW_EVALUATIONS, MIN_SHRINK, MIN_SHRINK_SECOND,
                         NOISE_FACTOR, PAIR_EVALUATIONS, PAIR_POOL, SCREEN, _halved, _map, _pays, fit_effects)
 from .localise import simulate_pneumatics

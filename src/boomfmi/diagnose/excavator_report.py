@@ -51,7 +51,7 @@ from ..compare import as_sensed
 from ..identify.excavator_outputs import (bound_machine, cannot_tell, excavator_nrmse, identify_recs, machine_for,
                                           measured_pistons, simulate_machine, ssv_values)
 from ..physics import reference_rig
-from ..physics.excavator import JOINTS
+from ..physics.linkage import JOINTS
 from ..outputs import OutputSet
 from ..recording import check_distinct, check_no_duplicates, check_same_rig, read_checked
 from .attribute import ABS_FLOOR, MIN_SHRINK, NOISE_FACTOR

@@ -59,7 +59,7 @@ from ..identify.fit import PRESSURE_COEFFICIENT, Motion, motion, runs, static_fr
 from ..identify.preprocess import lowpass
 from ..model import EFFECTS, Boom, Model, check_effects
 from ..physics import effects as fx
-from ..physics import excavator as exc
+from ..physics import linkage as exc
 from .attribute import fit_effects
 
 #: The least rest [s] at which the simulation restarts from the measured position.

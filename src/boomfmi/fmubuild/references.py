@@ -81,7 +81,7 @@ def _excavator_force_estimator() -> pd.DataFrame:
     with the hard_soil contact, sampled at 1 ms, times from 0: the measured pressures
     (gauge) and angles, the FMU's inputs."""
     from .. import experiments as E
-    from ..physics.excavator import JOINTS
+    from ..physics.linkage import JOINTS
     from ..rig import run_excavator_offline
     t0, t1 = EXCAVATOR_WINDOW
     d = run_excavator_offline({"machine": "excavator", "contact": E.contact("hard_soil").config()},

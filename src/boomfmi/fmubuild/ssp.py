@@ -225,7 +225,7 @@ def pack_ssp(ssd: Path, fmu_dir: Path, out: Path, system_connectors: bool = True
 #: the excavator's starts it at rest at mid-stroke.
 PARAMETER_SETS = {
     "boom": ("reference_rig", "The reference rig of shared/spec/reference-rig.md: every model parameter"),
-    "linkage": ("excavator", "The whole excavator of shared/spec/excavator.md (physics.excavator), at rest at mid-stroke"),
+    "linkage": ("excavator", "The whole excavator of shared/spec/excavator.md (physics.linkage), at rest at mid-stroke"),
 }
 #: The linkage's longest substep in the excavator SSP [s] (its FMU's default: 0.25 ms).
 #: One substep per 1 ms communication step: within 0.06 % NRMSE of the reference on the

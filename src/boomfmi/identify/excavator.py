@@ -1,8 +1,8 @@
 """Identification per joint of the whole excavator from its recordings.
 
-The linkage's rigid-body dynamics are known (``physics.excavator``: geometry, link
+The linkage's rigid-body dynamics are known (``physics.linkage``: geometry, link
 masses); the unknowns are each cylinder's Eq. 9 friction (K_v, F_s, F_d) and the mass
-of the payload in the bucket.  In piston coordinates (``physics.excavator.
+of the payload in the bucket.  In piston coordinates (``physics.linkage.
 piston_dynamics``) every joint's equation of motion is::
 
     M_x(x, m) x'' + bias(x, x', m) = F_p - K_v x' - F_c + lam J^T f_tip
@@ -11,7 +11,7 @@ with F_p the pneumatic forces from the recorded pressures, ``lam = dq/dx`` and M
 the bias (Coriolis, centrifugal, gravity) affine in the payload m (a point mass at the
 bucket's centre of mass: ``M_x(m) = M_x(0) + m (M_x(1) - M_x(0))``).  F_c is
 ``F_d scale dir`` while the cylinder slides (scale = cos(phi) for the boom,
-``physics.excavator.friction_scale``) and whatever holds it while it rests.
+``physics.linkage.friction_scale``) and whatever holds it while it rests.
 
 Three stages, as the boom's (``identify.fit``):
 
@@ -49,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import physics as ph
-from ..physics import excavator as exc
+from ..physics import linkage as exc
 from .fit import (Estimate, FitResult, REACH, motion, motion_modes, static_friction, _widened)
 from .preprocess import CUTOFF, Prepared, lowpass
 

@@ -48,7 +48,7 @@ from .._json import dumps, plain
 from ..compare import as_sensed
 from ..machine import assumption
 from ..outputs import OutputSet
-from ..physics import excavator as exc
+from ..physics import linkage as exc
 from ..recording import (EXCAVATOR_RIG_KEYS, Recording, check_distinct, check_no_duplicates, check_same_rig, read_checked,
                          recording_inputs)
 from ..system.ssv import write_ssv

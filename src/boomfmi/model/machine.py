@@ -1,6 +1,6 @@
 """A machine is a set of joints: each joint's valve, gas, cylinder, friction and effects
 (a boom :class:`Model`), and the mechanism that carries them: the boom's load (Eq. 8 to
-12, one joint: the boom rig) or the excavator's linkage (``physics/excavator.py``, four
+12, one joint: the boom rig) or the excavator's linkage (``physics/linkage.py``, four
 joints).  :class:`Machine` is the one description the reference
 (:func:`.reference.simulate`), the SSPs' names and the effects' checks read; the boom rig
 is the one-joint machine (:func:`boom_machine`), the whole excavator the four-joint one
@@ -24,7 +24,7 @@ import numpy as np
 from .. import physics as ph
 from ..physics import effects as fx
 from ..physics import reference_rig
-from ..physics.excavator import JOINTS, Excavator, excavator_parameters
+from ..physics.linkage import JOINTS, Excavator, excavator_parameters
 from ..physics.params import channel
 from .boom import Boom, Model, check_effects
 from .catalogue import EFFECTS, fmu_variable
@@ -36,7 +36,7 @@ def holding_pressures(ex: Excavator, x0, p_b0: float | None = None, payload: flo
     and the atmosphere) in every rod side, and the cap side's pressure whose cylinder
     force equals the gravity load reflected to the piston (``lam G``, the linkage's
     bias at rest)."""
-    from ..physics.excavator import _fast_posture, _prepared, _rigid_terms
+    from ..physics.linkage import _fast_posture, _prepared, _rigid_terms
     if p_b0 is None:
         p_b0 = 0.5 * (reference_rig.P_s + ex.P_atm)
     P = _prepared(ex, float(payload))

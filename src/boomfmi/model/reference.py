@@ -52,7 +52,7 @@ from scipy.integrate import solve_ivp
 
 from .. import physics as ph
 from ..physics import reference_rig
-from ..physics.excavator import JOINTS, advance_linkage, joint_angles, pistons_from_angles
+from ..physics.linkage import JOINTS, advance_linkage, joint_angles, pistons_from_angles
 from .boom import Boom, Model
 from .machine import Machine
 

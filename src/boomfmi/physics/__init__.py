@@ -7,7 +7,7 @@ name of that FMU's own.
 """
 from . import effects, reference_rig
 from .chamber import chamber_inflows, chamber_pressure_step, chamber_volumes, pressure_rates
-from .excavator import (JOINTS, Actuator, Excavator, Link, advance_linkage, check_excavator,
+from .linkage import (JOINTS, Actuator, Excavator, Link, advance_linkage, check_excavator,
                         coriolis, cylinder_forces, cylinder_torques, excavator_parameters,
                         forward_kinematics, gravity, joint_angles, joint_limits, kinetic_energy,
                         lever_arms, lumped_boom_load, mass_matrix, piston_accelerations,

@@ -48,7 +48,7 @@ import math
 import numpy as np
 
 from . import _xp as xp
-from . import excavator as exc
+from . import linkage as exc
 from .chamber import chamber_volumes
 from .geometry import phi_from_x
 from .lag import first_order_step
@@ -221,7 +221,7 @@ def reflected_force(f_est, f_prev, dt, gain, f_max, rate_max):
 #
 # The force of the environment on the bucket tip, and its 3-axis joystick.  Per joint
 # :func:`observed_joint_forces` (the boom's observer) on each cylinder's equation of
-# motion in piston coordinates (``excavator.piston_dynamics``) read backwards::
+# motion in piston coordinates (``linkage.piston_dynamics``) read backwards::
 #
 #     lam_i (J^T f_tip)_i = (M_x x'' + bias)_i - F_p,i + friction_i
 #

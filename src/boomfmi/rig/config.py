@@ -332,13 +332,13 @@ def load_config(source=None) -> RigConfig:
 
 
 # -- the whole excavator (shared/spec/excavator.md) -------------------------------------------
-#: Joints of the excavator's rig (``physics.excavator.JOINTS``).
+#: Joints of the excavator's rig (``physics.linkage.JOINTS``).
 JOINTS = ("swing", "boom", "arm", "bucket")
 #: Supply and gas parameters an excavator configuration's ``params`` may override
 #: (shared by the four valves and cylinders).
 EXCAVATOR_PARAMETERS = {name: PARAMETERS[name] for name in ("P_s", "P_e", "k", "R", "T", "P_atm")}
 #: Parameters a joint's ``params`` may override (the defaults: its actuator in
-#: ``physics.excavator``); the bore, rod, stroke and mounting stay the machine's.
+#: ``physics.linkage``); the bore, rod, stroke and mounting stay the machine's.
 JOINT_PARAMETERS = ("A_max", "V_a0", "V_b0", "K_v", "F_s", "F_d")
 #: Tip contacts: ``experiments.TipContact``'s two kinds and their keys (None: required).
 TIP_CONTACTS = {
@@ -437,7 +437,7 @@ def load_excavator_config(source=None) -> ExcavatorConfig:
     unknown or invalid one raises ``ValueError`` naming it (``joints.arm.effects.
     piston_leakage.A_leak``).  stribeck_friction's default breakaway force F_brk is
     scaled by the joint's bore area relative to 32 mm, as its F_s is."""
-    from ..physics.excavator import Excavator
+    from ..physics.linkage import Excavator
     if source is None:
         data = {"machine": "excavator"}
     elif isinstance(source, ExcavatorConfig):

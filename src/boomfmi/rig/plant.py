@@ -41,7 +41,7 @@ Gauss-Seidel.  The mechanisms:
   With every effect and the noise off it reproduces
   ``boomfmi.model.reference.simulate_reference`` to about 0.01 % NRMSE on the paper's
   experiment.
-* :class:`Linkage` (the excavator): :func:`boomfmi.physics.excavator.advance_linkage`
+* :class:`Linkage` (the excavator): :func:`boomfmi.physics.linkage.advance_linkage`
   (mass matrix, Coriolis, gravity, Eq. 9 stick/slip per cylinder, end stops, the tip
   force through J^T); the friction effects change that cylinder's F_s, F_d over the
   substep.  Substeps are at most :data:`LINKAGE_SUBSTEP` = 0.25 ms (shorter with a
@@ -90,7 +90,7 @@ from ..experiments import TipContact
 from ..model.boom import Boom, Model
 from ..physics import reference_rig
 from ..physics.chamber import chamber_volumes, pressure_rates
-from ..physics.excavator import (JOINTS, Excavator, advance_linkage, joint_angles, lever_arms,
+from ..physics.linkage import (JOINTS, Excavator, advance_linkage, joint_angles, lever_arms,
                                  mass_matrix, piston_dynamics, tip_jacobian, tip_position)
 from ..physics.geometry import alpha_from_x
 from ..physics.orifice import signed_mass_flow, signed_mass_flow_slope
@@ -194,7 +194,7 @@ def tip_contact(contact: dict | None) -> TipContact | None:
 
 
 def machine(config: ExcavatorConfig) -> Excavator:
-    """The linkage the rig moves: ``physics.excavator``'s with the configuration's
+    """The linkage the rig moves: ``physics.linkage``'s with the configuration's
     per-joint overrides (A_max, dead volumes, friction) and P_atm."""
     ex = Excavator()
     changes = {j: replace(getattr(ex, j), **config.joints[j]["overrides"])
@@ -509,7 +509,7 @@ class BoomLoad:
 
 class Linkage:
     """The excavator's mechanism: the four pistons moved together through the linkage
-    (:func:`boomfmi.physics.excavator.advance_linkage`: mass matrix, Coriolis, gravity,
+    (:func:`boomfmi.physics.linkage.advance_linkage`: mass matrix, Coriolis, gravity,
     Eq. 9 stick/slip per cylinder, end stops, the tip force through J^T) with the
     payload and the tip contact; the joints' friction effects change each cylinder's
     F_s, F_d over the substep."""

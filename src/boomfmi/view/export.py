@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..physics import excavator
+from ..physics import linkage
 from .frames import TIP_FORCE_SCALE, Run, heading, load_run
 
 MACHINE, GHOST, FORCE, TRUTH, STEEL, BASE = "#f0a030", "#5ab0ff", "#ff4d5e", "#9aa3b5", "#b8c0cc", "#59606c"
@@ -214,7 +214,7 @@ class BoomDrawing(Drawing):
 
 
 #: the excavator's drawn segments: the upper structure (swing axis to boom pivot) and
-#: the links, from the points of ``physics.excavator.forward_kinematics``
+#: the links, from the points of ``physics.linkage.forward_kinematics``
 EXCAVATOR_LINKS = (("upper", "swing_axis", "boom_pivot", 6), ("boom", "boom_pivot", "arm_pivot", 7),
                    ("arm", "arm_pivot", "bucket_pivot", 6), ("bucket", "bucket_pivot", "tip", 8))
 CYLINDER_BODY = 0.55              # the body's share of a cylinder's eye-to-eye length, as on the page
@@ -249,7 +249,7 @@ class LinkageDrawing(Drawing):
         self.arrows = {"f_tip_est": self._arrows(FORCE), "f_tip": self._arrows(TRUTH)}
         box = left[1, 1].get_position(self.fig)
         self.text.set_position((box.x0 + 0.01, box.y1))
-        joints = excavator.JOINTS
+        joints = linkage.JOINTS
         deg = lambda v: None if v is None else math.degrees(v)
 
         def per_joint(q: str, conv) -> list:
@@ -280,7 +280,7 @@ class LinkageDrawing(Drawing):
         for ax, _ in self.views:
             m = {name: ax.plot([], [], color=color, lw=lw, alpha=alpha, solid_capstyle="round")[0]
                  for name, _, _, lw in EXCAVATOR_LINKS}
-            for j in excavator.JOINTS:
+            for j in linkage.JOINTS:
                 m[f"rod_{j}"] = ax.plot([], [], color=steel, lw=1.6, alpha=alpha)[0]
                 m[f"body_{j}"] = ax.plot([], [], color=color, lw=4, alpha=alpha, solid_capstyle="butt")[0]
             out.append(m)
@@ -305,7 +305,7 @@ class LinkageDrawing(Drawing):
                 continue
             for name, a, b, _ in EXCAVATOR_LINKS:
                 lines[name].set_data([pts[a][0], pts[b][0]], [pts[a][k], pts[b][k]])
-            for j in excavator.JOINTS:
+            for j in linkage.JOINTS:
                 base, rod = np.asarray(pts[f"cyl_{j}_base"]), np.asarray(pts[f"cyl_{j}_rod"])
                 end = base + CYLINDER_BODY * (rod - base)
                 lines[f"rod_{j}"].set_data([base[0], rod[0]], [base[k], rod[k]])
@@ -337,7 +337,7 @@ class LinkageDrawing(Drawing):
         deg = lambda p, j: "      -" if not p or p["angle"][j] is None else f"{math.degrees(p['angle'][j]):7.2f}"
         vec = lambda v: "   -" if v is None else " ".join(f"{c:6.1f}" for c in v)
         lines = [f"t       {f['t']:.3f} s", "        machine  model [deg]"]
-        lines += [f"{j:<8}{deg(f['machine'], j)}  {deg(f['model'], j)}" for j in excavator.JOINTS]
+        lines += [f"{j:<8}{deg(f['machine'], j)}  {deg(f['model'], j)}" for j in linkage.JOINTS]
         lines += [f"f_tip_est [N] {vec(f['f_tip_est'])}", f"f_tip     [N] {vec(f['f_tip'])}"]
         return "\n".join(lines)
 

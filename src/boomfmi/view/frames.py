@@ -21,7 +21,7 @@ points and does no geometry of its own.
 
 An **excavator** run (its recording's kind, ``recording.recording_kind``) gives
 a :class:`Run` of the :class:`LinkageMechanism` and frames of ``"kind": "excavator"``: the
-whole machine's points in 3D from ``physics.excavator.forward_kinematics`` (see the
+whole machine's points in 3D from ``physics.linkage.forward_kinematics`` (see the
 excavator section below); a boom run's mechanism is the :class:`BoomMechanism`.
 :func:`load_run` and :func:`live_frame` tell the two apart; the rest is the same code.
 """
@@ -35,7 +35,7 @@ import numpy as np
 import pandas as pd
 
 from ..physics import Cylinder, Geometry, linkage_points, x_from_alpha
-from ..physics import excavator
+from ..physics import linkage
 from ..physics.force_estimation import F_BOUND
 from ..physics import reference_rig
 from ..recording import read_recording
@@ -65,7 +65,7 @@ FORCES = ("f_est", "f_ext", "f_reflect")
 #      "f_tip": [N, N, N] or None, "f_tip_est": [...] or None, "f_reflect": [...] or None,
 #      "f_tip_lo": [N or None per axis] or None, "f_tip_hi": [...] or None}
 #
-# ``points`` are ``physics.excavator.forward_kinematics``'s, in the world frame (z up):
+# ``points`` are ``physics.linkage.forward_kinematics``'s, in the world frame (z up):
 # the swing axis at the ground, the boom, arm and bucket pivots, the tip and each
 # cylinder's eyes; the page draws from them and does no kinematics of its own.
 EXCAVATOR_POSTURE = ("angle", "p_a", "p_b")
@@ -116,14 +116,14 @@ def excavator_angle_map(q_ref=None) -> list[dict]:
     checked to be the same at the joints' other postures (a revolute joint's angle is
     its drawn angle but for the sign and the offset)."""
     if q_ref is None:
-        q_ref = np.asarray(excavator.joint_angles(_mid_stroke()), float)
+        q_ref = np.asarray(linkage.joint_angles(_mid_stroke()), float)
     q_ref = np.asarray(q_ref, float)
-    g0 = _angles_of_points(excavator.forward_kinematics(q_ref))
+    g0 = _angles_of_points(linkage.forward_kinematics(q_ref))
     out = []
-    for k, j in enumerate(excavator.JOINTS):
+    for k, j in enumerate(linkage.JOINTS):
         dq = np.zeros(len(q_ref))
         dq[k] = 0.05
-        d = _wrap(_angles_of_points(excavator.forward_kinematics(q_ref + dq)) - g0)
+        d = _wrap(_angles_of_points(linkage.forward_kinematics(q_ref + dq)) - g0)
         sign = 1.0 if d[k] > 0 else -1.0
         if abs(abs(d[k]) - 0.05) > 1e-6 or np.max(np.abs(np.delete(d, k))) > 1e-6:
             raise ValueError(f"the drawing cannot show joint {j!r}: turning it by 0.05 rad turns the drawn "
@@ -134,7 +134,7 @@ def excavator_angle_map(q_ref=None) -> list[dict]:
 
 def _mid_stroke() -> np.ndarray:
     """Each piston at half its stroke [m] (the linkage's parameters)."""
-    return 0.5 * excavator.excavator_parameters().strokes
+    return 0.5 * linkage.excavator_parameters().strokes
 
 
 # -- one run, one live frame, for the machine of one joint or four -------------------------------
@@ -218,14 +218,14 @@ class BoomMechanism:
 
 @dataclass(frozen=True)
 class LinkageMechanism:
-    """The excavator's linkage as the view draws it: the joints ``excavator.JOINTS``,
-    each one's angle and pressures, the points of ``physics.excavator.forward_kinematics``,
+    """The excavator's linkage as the view draws it: the joints ``linkage.JOINTS``,
+    each one's angle and pressures, the points of ``physics.linkage.forward_kinematics``,
     the tip's forces TIP_FORCES and their interval TIP_BOUNDS; ``angle_map`` as
     :func:`excavator_angle_map` (None: found at mid-stroke)."""
     angle_map: list | None = None
 
     kind = "excavator"
-    joints = excavator.JOINTS
+    joints = linkage.JOINTS
     truth = "f_tip"
 
     def head(self, t: float) -> dict:
@@ -235,7 +235,7 @@ class LinkageMechanism:
         """The fixed parts of the excavator's drawing: its joints, each cylinder's bore
         and rod [m], the ground's height (z = 0), the tip force's arrow scale and how the
         drawn angles map to the recording's (:func:`excavator_angle_map`)."""
-        params = excavator.excavator_parameters()
+        params = linkage.excavator_parameters()
         cylinders = {j: {"bore": a.bore, "rod": a.rod} for j, a in zip(self.joints, params.actuators)}
         return {"kind": "excavator", "joints": list(self.joints), "cylinders": cylinders, "ground_z": 0.0,
                 "force_scale": TIP_FORCE_SCALE,
@@ -246,7 +246,7 @@ class LinkageMechanism:
         alpha, arm, bucket), as lists; None for a posture with an angle missing."""
         if q is None or any(v is None for v in q):
             return None
-        return {k: [float(c) for c in v] for k, v in excavator.forward_kinematics(np.asarray(q, float)).items()}
+        return {k: [float(c) for c in v] for k, v in linkage.forward_kinematics(np.asarray(q, float)).items()}
 
     def posture(self, values: dict) -> dict:
         """A posture from its EXCAVATOR_POSTURE values, each a list in joint order."""
@@ -419,7 +419,7 @@ def live_frame(sample: dict, geom: Geometry) -> dict:
 
 def is_excavator_sample(sample: dict) -> bool:
     """Whether a live sample is the excavator's (it has a joint's angle)."""
-    return any(f"angle_{j}{s}" in sample for j in excavator.JOINTS for s in ("", "_measured"))
+    return any(f"angle_{j}{s}" in sample for j in linkage.JOINTS for s in ("", "_measured"))
 
 
 __all__ = ["Run", "BoomMechanism", "LinkageMechanism", "mechanism_of", "load_run", "live_frame"]

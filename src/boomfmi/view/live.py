@@ -42,7 +42,7 @@ import time
 from ..link.client import parse_address
 from ..link.protocol import MAC_SIZE, load_key, mac, verifies
 from ..physics import Geometry, ParameterError, check_geometry
-from ..physics import excavator
+from ..physics import linkage
 
 #: the view's frame rate is capped by what the sender sends
 DEFAULT_RATE = 60.0
@@ -61,8 +61,8 @@ BOUNDS = {
     "p_a": 1e8, "p_b": 1e8, "p_a_measured": 1e8, "p_b_measured": 1e8,   # Pa gauge
     "f_est": 1e8, "f_ext": 1e8, "f_reflect": 1e8,           # N
 }
-#: the excavator's joints (the linkage's ``physics.excavator.JOINTS``) and its sample's fields
-EXCAVATOR_JOINTS = excavator.JOINTS
+#: the excavator's joints (the linkage's ``physics.linkage.JOINTS``) and its sample's fields
+EXCAVATOR_JOINTS = linkage.JOINTS
 BOUNDS.update({f"{q}_{j}{s}": bound for j in EXCAVATOR_JOINTS for s in ("", "_measured")
                for q, bound in (("angle", 2 * math.pi), ("p_a", 1e8), ("p_b", 1e8))})
 BOUNDS.update({f"{f}_{a}": 1e8 for f in ("f_tip", "f_tip_est", "f_reflect") for a in "xyz"})
