@@ -47,7 +47,17 @@ def main(argv=None) -> int:
     parser.add_argument("--fmi", choices=("2", "3"), default=None,
                         help="only one FMI version: 2 into <out>/fmus/ with the SSPs, 3 into <out>/fmi3/ "
                              "(default: both)")
+    parser.add_argument("--effects", type=Path, action="append", default=[], metavar="FILE",
+                        help="a Python file of your own effects (a plug-in); its options go into the FMUs of their "
+                             "stages, its module into those FMUs (installed plug-ins, entry point boomfmi.effects, "
+                             "and $BOOMFMI_EFFECTS are loaded anyway); repeatable")
     args = parser.parse_args(argv)
+    if args.effects:
+        from boomfmi.model.catalogue import PluginError, load_plugins
+        try:
+            load_plugins([str(f.resolve()) for f in args.effects])
+        except PluginError as e:
+            parser.error(str(e))
     if args.fmi == "3":
         return build_fmi3(parser, args)
     unknown = sorted(set(args.names) - set(FMU_NAMES))

@@ -166,6 +166,7 @@ EFFECT_FORMS = {
     "valve_deadband": {
         "overlap": {"d": (0.1, 0.6)},
         "rounded": {"d": (0.2, 0.6), "w": (0.05, 0.2)},
+        "asymmetric": {"d_ext": (0.05, 0.6), "d_ret": (0.05, 0.6), "w": (0.0, 0.05)},
     },
     "heat_transfer": {
         "wall": {"h_c": (15.0, 150.0)},
@@ -179,10 +180,13 @@ EFFECT_FORMS = {
     "stribeck_friction": {
         "exponential": {"F_brk": (125.0, 200.0), "v_s": (0.002, 0.02)},
         "gaussian": {"F_brk": (125.0, 200.0), "v_s": (0.002, 0.02)},
+        "power": {"F_brk": (125.0, 200.0), "v_s": (0.002, 0.02), "delta": (0.5, 2.5)},
     },
     "end_cushioning": {
         "needle": {"l_c": (0.005, 0.02), "A_n": (2e-7, 1.5e-6)},
         "sensed_port": {"l_c": (0.005, 0.02), "A_n": (2e-7, 1.5e-6), "V_p": (3e-6, 1e-5)},
+        "no_check": {"l_c": (0.005, 0.02), "A_n": (2e-7, 1.5e-6)},
+        "tapered": {"l_c": (0.005, 0.02), "A_n": (2e-7, 1.5e-6), "A_g": (1e-6, 6e-6)},
     },
     "sensor_lag": {
         "first_order": {"tau": (0.002, 0.02)},
@@ -191,6 +195,7 @@ EFFECT_FORMS = {
     "pressure_friction": {
         "linear": {"c": (0.03, 0.25), "asym": (0.8, 1.25)},
         "seal_split": {"c_p": (0.03, 0.3), "c_r": (0.03, 0.3)},
+        "saturating": {"g": (0.1, 2.0), "p_0": (1e5, 5e5)},
     },
 }
 #: Disturbances outside effects.md's vocabulary, same layout.
@@ -208,6 +213,7 @@ FORM_DEFAULTS = {
     ("valve_dynamics", "rate_limited"): {"tau": 0.004, "rate": 300.0},
     ("valve_deadband", "overlap"): {"d": 0.3},
     ("valve_deadband", "rounded"): {"d": 0.4, "w": 0.1},
+    ("valve_deadband", "asymmetric"): {"d_ext": 0.2, "d_ret": 0.4, "w": 0.02},
     ("heat_transfer", "wall"): {"h_c": 60.0, "A_dead": None},
     ("heat_transfer", "polytropic"): {"n": 1.2},
     ("piston_leakage", "laminar"): {"C": 2e-11},
@@ -215,13 +221,17 @@ FORM_DEFAULTS = {
     ("piston_leakage", "mixed"): {"C": 1e-11, "A": 5e-9},
     ("stribeck_friction", "exponential"): {"F_brk": 160.0, "v_s": 0.008},
     ("stribeck_friction", "gaussian"): {"F_brk": 160.0, "v_s": 0.008},
+    ("stribeck_friction", "power"): {"F_brk": 160.0, "v_s": 0.008, "delta": 1.5},
     ("end_cushioning", "needle"): {"l_c": 0.012, "A_n": 6e-7, "chamfer": 5e-4},
     ("end_cushioning", "sensed_port"): {"l_c": 0.012, "A_n": 6e-7, "V_p": 6e-6, "chamfer": 5e-4,
                                         "G_free": 1e-6},
+    ("end_cushioning", "no_check"): {"l_c": 0.012, "A_n": 6e-7, "chamfer": 5e-4},
+    ("end_cushioning", "tapered"): {"l_c": 0.012, "A_n": 6e-7, "A_g": 3e-6, "chamfer": 5e-4},
     ("sensor_lag", "first_order"): {"tau": 0.008},
     ("sensor_lag", "delay_lag"): {"delay": 0.004, "tau": 0.004},
     ("pressure_friction", "linear"): {"c": 0.12, "asym": 1.0},
     ("pressure_friction", "seal_split"): {"c_p": 0.12, "c_r": 0.12},
+    ("pressure_friction", "saturating"): {"g": 0.8, "p_0": 2.5e5},
     ("vibration", "sinusoidal"): {"amplitude": 30.0, "frequency": 30.0, "phase": 0.0},
     ("supply_sag", "reservoir"): {"V_r": 5e-4, "G": 1.5e-8},
     ("payload_change", "step"): {"t_change": 3.0, "dM": 5.0, "dF_L": 50.0},
@@ -247,6 +257,12 @@ FORM_DOCS = {
         "Overlap with a rounded (C1, quadratic) edge of half-width w around |s - 5| = d: the "
         "effective excess e = |s-5| - d becomes (e + w)^2 / (4 w) for |e| <= w.  d [V] 0.2 to 0.6, "
         "w [V] 0.05 to 0.2 (w <= d, so the centre stays closed).",
+    ("valve_deadband", "asymmetric"):
+        "A spool whose overlap differs between its two sides (ground or centred unevenly): no port "
+        "opens while 5 - d_ext <= s <= 5 + d_ret; on each side the opening grows from that side's "
+        "edge and is rescaled to reach A_max at full command: A = A_max min((|s-5| - d)/(5 - d), 1), "
+        "d = d_ext for s < 5 (extending), d_ret for s > 5; a rounded edge of half-width w on both "
+        "(as ``rounded``; 0: sharp).  d_ext, d_ret [V] 0.05 to 0.6, w [V] 0 to 0.05 (w <= both).",
     ("heat_transfer", "wall"):
         "Chamber temperature states and the energy equation V dP/dt + k P dV/dt = k R sum(mdot_i "
         "T_i) + (k-1) Q, Q = h_c A_wall(x) (T_wall - T_chamber); inflow at the supply (or "
@@ -270,6 +286,9 @@ FORM_DOCS = {
         "0.002 to 0.02.",
     ("stribeck_friction", "gaussian"):
         "As exponential with exp(-(v/v_s)^2).  F_brk [N] 125 to 200, v_s [m/s] 0.002 to 0.02.",
+    ("stribeck_friction", "power"):
+        "The generalised Stribeck curve: as exponential with exp(-(|v|/v_s)^delta), delta [-] 0.5 "
+        "(a long tail) to 2.5 (a sharp drop); F_brk [N] 125 to 200, v_s [m/s] 0.002 to 0.02.",
     ("end_cushioning", "needle"):
         "Within l_c of each stroke end the chamber being exhausted vents through its cushioning "
         "needle A_n in series with the valve port (series areas combined as A A_n / sqrt(A^2 + "
@@ -283,6 +302,17 @@ FORM_DOCS = {
         "the chamber's outflow passes only the needle A_n, its inflow the check valve (free).  The "
         "pressure sensor reads the chamber.  l_c [m] 0.005 to 0.02, A_n [m^2] 2e-7 to 1.5e-6, "
         "V_p [m^3] 3e-6 to 1e-5 (< V_0).",
+    ("end_cushioning", "no_check"):
+        "As ``needle`` without the check valve (a cushion with a fixed bleed and no return "
+        "function): within l_c of the end the chamber's flow passes the needle A_n in series with "
+        "the valve port both ways, so the piston leaving the end draws its air through the needle "
+        "too and starts slowly.  l_c [m] 0.005 to 0.02, A_n [m^2] 2e-7 to 1.5e-6.",
+    ("end_cushioning", "tapered"):
+        "A tapered (conical) cushion spear with a check valve: as the spear enters the cushion "
+        "bore, the annular gap around it narrows linearly from A_n + A_g at the cushion's entry to "
+        "the needle's A_n at the stroke end (a progressive cushion: the braking grows over the "
+        "last l_c); outflow passes that gap in series with the valve port, inflow the check valve "
+        "(free).  l_c [m] 0.005 to 0.02, A_n [m^2] 2e-7 to 1.5e-6, A_g [m^2] 1e-6 to 6e-6.",
     ("sensor_lag", "first_order"):
         "Every measured channel (alpha, p_a, p_b) passes a first-order lag tau [s] 0.002 to 0.02.",
     ("sensor_lag", "delay_lag"):
@@ -296,6 +326,11 @@ FORM_DOCS = {
         "The piston seal pressed by the pressure difference across it, the rod seal by the rod-side "
         "pressure: factor 1 + c_p |p_a - p_b| / 1e5 + c_r (p_b - P_atm) / 1e5 on F_d and F_s.  "
         "c_p, c_r [1/bar] 0.03 to 0.3.",
+    ("pressure_friction", "saturating"):
+        "Seal lips pressed by the chambers' pressure until fully in contact: factor "
+        "1 + g (1 - exp(-max(p_a + p_b - 2 P_atm, 0) / p_0)) on F_d and F_s (and a Stribeck F_brk); "
+        "linear at low pressure (g / p_0 per pascal), levelling off at 1 + g.  g [-] 0.1 to 2, "
+        "p_0 [Pa] 1e5 to 5e5.",
     ("vibration", "sinusoidal"):
         "A sinusoidal force along the cylinder axis (positive extending): amplitude [N] 10 to 60, "
         "frequency [Hz] 15 to 60 (an engine's), phase [rad].",
@@ -440,6 +475,9 @@ class _Model:
             self.strib_F = float(sp["F_brk"])
             self.strib_vs = float(sp["v_s"])
             self.strib_gauss = self.strib[0] == "gaussian"
+            self.strib_delta = float(sp["delta"]) if self.strib[0] == "power" else None
+            if self.strib_delta is not None and not self.strib_delta > 0:
+                raise ValueError(f"stribeck power delta must be positive, not {self.strib_delta}")
             if self.strib_F < p.F_d:
                 raise ValueError(f"stribeck F_brk = {self.strib_F} N lies below F_d = {p.F_d} N")
             if self.strib_vs <= 0:
@@ -450,15 +488,24 @@ class _Model:
                              f"(the slip friction at rest would exceed the static level)")
         if self.db:
             dp = self.db[1]
-            self.db_d = float(dp["d"])
-            self.db_w = float(dp.get("w", 0.0)) if self.db[0] == "rounded" else 0.0
-            if not 0.0 <= self.db_d < 5.0 or self.db_w < 0 or self.db_w > self.db_d:
-                raise ValueError(f"valve_deadband needs 0 <= w <= d < 5 V, got d = {self.db_d}, w = {self.db_w}")
+            if self.db[0] == "asymmetric":
+                self.db_sides = (float(dp["d_ext"]), float(dp["d_ret"]))
+            else:
+                self.db_sides = (float(dp["d"]),) * 2
+            self.db_d = self.db_sides[0]
+            self.db_w = float(dp.get("w", 0.0)) if self.db[0] in ("rounded", "asymmetric") else 0.0
+            for d in self.db_sides:
+                if not 0.0 <= d < 5.0 or self.db_w < 0 or self.db_w > d:
+                    raise ValueError(f"valve_deadband needs 0 <= w <= d < 5 V, got d = {d}, w = {self.db_w}")
         if self.cush:
             cp = self.cush[1]
             self.l_c = float(cp["l_c"])
             self.A_n = float(cp["A_n"])
             self.chamfer = float(cp["chamfer"])
+            self.cush_check = self.cush[0] != "no_check"        # inflow passes freely
+            self.A_g = float(cp["A_g"]) if self.cush[0] == "tapered" else 0.0
+            if self.A_n <= 0 or self.A_g < 0:
+                raise ValueError(f"end_cushioning needs A_n > 0 and A_g >= 0, got {self.A_n}, {self.A_g}")
             if not 0.0 < self.l_c <= p.L / 3.0 + 1e-12:
                 raise ValueError(f"end_cushioning l_c must lie in (0, L/3], not {self.l_c}")
             if self.cush[0] == "sensed_port":
@@ -534,7 +581,7 @@ class _Model:
         e = abs(s - 5.0)
         if not self.db:
             return self.plant.A_max * min(e / 5.0, 1.0)
-        d, w = self.db_d, self.db_w
+        d, w = self.db_sides[0 if s < 5.0 else 1], self.db_w
         ex = e - d
         if w > 0.0 and -w < ex < w:
             ex = (ex + w) ** 2 / (4.0 * w)           # C1 quadratic edge
@@ -597,6 +644,8 @@ class _Model:
             if direction < 0:
                 f *= pp["asym"]
             return f
+        if form == "saturating":
+            return 1.0 + pp["g"] * -math.expm1(-max(y[2] + y[3] - 2.0 * P_atm, 0.0) / pp["p_0"])
         return 1.0 + pp["c_p"] * abs(y[2] - y[3]) / 1e5 + pp["c_r"] * (y[3] - P_atm) / 1e5
 
     def static_level(self, y, direction, cphi):
@@ -607,7 +656,10 @@ class _Model:
         s = 1.0 if v > 0.0 else -1.0
         if self.strib:
             z = abs(v) / self.strib_vs
-            S = math.exp(-z * z) if self.strib_gauss else math.exp(-z)
+            if self.strib_delta is not None:
+                S = math.exp(-z ** self.strib_delta)
+            else:
+                S = math.exp(-z * z) if self.strib_gauss else math.exp(-z)
             Fc = self.plant.F_d + (self.strib_F - self.plant.F_d) * S
         else:
             Fc = self.plant.F_d
@@ -618,6 +670,13 @@ class _Model:
         L = self.plant.L
         return (_smoothstep((self.l_c - x) / self.chamfer),
                 _smoothstep((x - (L - self.l_c)) / self.chamfer))
+
+    def cushion_area(self, gap):
+        """The cushion's restriction [m^2] with the piston ``gap`` [m] from the stroke end:
+        the needle A_n, plus a tapered spear's annulus narrowing linearly to it."""
+        if not self.A_g:
+            return self.A_n
+        return self.A_n + self.A_g * min(max(gap / self.l_c, 0.0), 1.0)
 
     # ---------------------------------------------------------------- derivatives
     def derivs(self, t, y, mode, ucmd, locks=(False, False)):
@@ -677,12 +736,15 @@ class _Model:
                 oa, ob = Pe, Ps
             area_a = area_b = area
             if self.cush and not self.port:
-                # a cushioned chamber's outflow passes its needle in series with the port
-                # (the check valve lets inflow through freely)
-                if fa > 0.0 and na > oa:
-                    area_a = (1.0 - fa) * area + fa * area * self.A_n / math.hypot(area, self.A_n)
-                if fb > 0.0 and nb > ob:
-                    area_b = (1.0 - fb) * area + fb * area * self.A_n / math.hypot(area, self.A_n)
+                # a cushioned chamber's outflow passes its needle (a tapered spear's gap) in
+                # series with the port; the check valve lets inflow through freely, where
+                # there is one
+                if fa > 0.0 and (na > oa or not self.cush_check):
+                    A_c = self.cushion_area(x)
+                    area_a = (1.0 - fa) * area + fa * area * A_c / math.hypot(area, A_c)
+                if fb > 0.0 and (nb > ob or not self.cush_check):
+                    A_c = self.cushion_area(p.L - x)
+                    area_b = (1.0 - fb) * area + fb * area * A_c / math.hypot(area, A_c)
             # a locked chamber sits at its port's source pressure: no flow (see ``lockable``)
             m_va = 0.0 if locks[0] else self.flow(area_a, oa, na, T, Tna)
             m_vb = 0.0 if locks[1] else self.flow(area_b, ob, nb, T, Tnb)

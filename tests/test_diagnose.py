@@ -64,7 +64,10 @@ def test_a_leaking_piston_is_found_and_the_report_follows_the_spec(leaky, ssp_pa
         < html.index("<h2>Baseline")
     assert "Most likely cause: piston_leakage" in proc.stdout and "replace the piston seal" in proc.stdout
     assert "95 % interval" in html and "N&middot;s/m" in html and "kg/(s&middot;Pa)" in html
-    assert '{"' not in html and "How much each candidate explains" in html
+    assert '{"' not in html and "How probable each explanation is" in html
+    probs = doc["probabilities"]     # the verdict is the most probable set; none and unexplained weighed too
+    assert next(iter(probs)) == "piston_leakage" and {"none", "unexplained"} <= set(probs)
+    assert abs(sum(probs.values()) - 1.0) < 1e-3 and best["score"] == probs["piston_leakage"]
     assert 'src="data:image/png;base64,' in html and 'src="overlay_' not in html
     lo, hi = doc["baseline"]["ci95"]["K_v"]
     assert lo <= doc["baseline"]["params"]["K_v"] <= hi and doc["baseline"]["units"]["K_v"] == "N.s/m"

@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 
 from boomfmi import experiments as E
-from boomfmi.identify.excavator import JOINTS, true_values
+from boomfmi.identify.joints import JOINTS, true_values
 from boomfmi.recording import write_recording
 from boomfmi.rig import run_excavator_offline
 from boomfmi.system.ssv import read_ssv

@@ -15,7 +15,7 @@ import pytest
 
 from boomfmi import experiments as E
 from boomfmi.cli import main
-from boomfmi.identify.excavator import JOINTS, true_values
+from boomfmi.identify.joints import JOINTS, true_values
 from boomfmi.physics.force_estimation import F_BOUND
 from boomfmi.recording import read_recording, write_recording
 from boomfmi.rig import run_excavator_offline

@@ -191,7 +191,7 @@ def test_an_interrupted_identification_leaves_the_previous_set(runs, monkeypatch
 
     def interrupted(*args, **kw):
         raise KeyboardInterrupt
-    monkeypatch.setattr(identification, "plot_fit", interrupted)
+    monkeypatch.setattr(identification.outputs, "plot_fit", interrupted)
     with pytest.raises(KeyboardInterrupt):
         write_outputs(result, recs, out)
     assert {p: Path(p).read_bytes() for p in before} == before

@@ -11,8 +11,8 @@ import math
 import pytest
 
 from boomfmi import experiments as E
-from boomfmi.identify.excavator import JOINTS, PROMISE, _honest_static, identify_excavator, true_values
-from boomfmi.identify.excavator_outputs import cannot_tell
+from boomfmi.identify.joints import JOINTS, PROMISE, honest_static, identify_joints, true_values
+from boomfmi.identify.outputs import cannot_tell
 from boomfmi.identify.fit import Estimate
 from boomfmi.rig import run_excavator_offline
 
@@ -23,7 +23,7 @@ PAYLOAD = 0.5
 def seed3():
     cfg = {"machine": "excavator", "payload": PAYLOAD, "seed": 3}
     recs = [run_excavator_offline(cfg, c, c.duration) for c in (E.digging_cycle(), E.excavator_excitation(seed=0))]
-    result = identify_excavator(recs)
+    result = identify_joints(recs)
     return result, cannot_tell(result)
 
 
@@ -48,15 +48,15 @@ def test_every_static_friction_on_a_noise_draw_is_within_5_percent_or_flagged_an
 
 def test_a_flat_topped_start_posterior_widens_the_interval_to_its_likelihood_range():
     e = Estimate(100.0, (96.0, 101.0), "N")
-    wide, identified = _honest_static(e, {"likelihood_range_N": [90.0, 104.0], "grid_N": [50.0, 200.0]})
+    wide, identified = honest_static(e, {"likelihood_range_N": [90.0, 104.0], "grid_N": [50.0, 200.0]})
     assert wide.value == 100.0
     assert wide.ci95[0] <= 90.0 and wide.ci95[1] >= 104.0
     assert not identified                         # wider than PROMISE on one side
-    narrow, identified = _honest_static(e, {"likelihood_range_N": [98.0, 100.5], "grid_N": [50.0, 200.0]})
+    narrow, identified = honest_static(e, {"likelihood_range_N": [98.0, 100.5], "grid_N": [50.0, 200.0]})
     assert narrow.ci95[0] <= 96.0 and narrow.ci95[1] >= 101.0     # never narrower than the posterior's
     assert identified and narrow.relative_halfwidth < PROMISE
     # a range that reaches the grid's top: no start bounds F_s from above
-    _, identified = _honest_static(e, {"likelihood_range_N": [99.0, 200.0], "grid_N": [50.0, 200.0]})
+    _, identified = honest_static(e, {"likelihood_range_N": [99.0, 200.0], "grid_N": [50.0, 200.0]})
     assert not identified
 
 

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from boomfmi.compare import simulate_recording
-from boomfmi.diagnose import REGIMES, localise, regimes
+from boomfmi.diagnose import REGIMES, regimes
+from boomfmi.diagnose.localise import localise
 from boomfmi.experiments import paper_multistep
 from boomfmi.model import Model
 from boomfmi.identify.preprocess import prepare

@@ -76,7 +76,7 @@ def test_a_bad_value_is_named_with_the_file_and_its_key(tmp_path, change, says):
 
 
 def test_an_excavator_s_values_reach_its_sidecar_and_its_identification(tmp_path):
-    from boomfmi.identify.excavator_outputs import machine_for
+    from boomfmi.identify.preprocess import machine_for
     doc = machine_document("excavator")
     doc["rig"].update(stroke_arm="90 mm", bore_bucket="22 mm", K_v_arm=900.0)
     (tmp_path / "ex.json").write_text(json.dumps(doc))

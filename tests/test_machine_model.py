@@ -234,7 +234,7 @@ def test_confirm_machine_shrinks_the_arms_leak_through_the_ssp(tmp_path):
     move: through excavator.ssp the arm's error shrinks by far with the rig's leak set on
     cylinder_arm; the swing and the boom, untouched, keep theirs."""
     from boomfmi.diagnose.confirm import confirm_machine
-    from boomfmi.identify.excavator import true_values
+    from boomfmi.identify.joints import true_values
     from boomfmi.paths import built
     from boomfmi.recording import read_recording
     from boomfmi.rig import run_excavator_offline
@@ -304,7 +304,7 @@ def test_a_campaign_runs_an_excavator_case_on_a_local_cluster(tmp_path):
     ``unexplained@<joint>``.)"""
     from boomfmi.campaign import run_campaign
     from boomfmi.campaign.manifest import write_manifest
-    from boomfmi.identify.excavator import true_values
+    from boomfmi.identify.joints import true_values
     from boomfmi.rig import run_excavator_offline
     cfg = json.loads((EXAMPLES / "excavator_none.json").read_text())
     fit = _recording(run_excavator_offline(cfg, E.excavator_excitation(seed=1, duration=4.0), 4.0),

@@ -9,7 +9,6 @@ import pandas as pd
 import pytest
 
 from boomfmi import experiments as E
-from boomfmi.identify import SSP_NAMES
 from boomfmi.model import Model, fmu_variable
 from boomfmi.model import machine as M
 from boomfmi.model import reference as R
@@ -18,6 +17,9 @@ from boomfmi.physics.linkage import JOINTS
 from boomfmi.physics.params import channel
 
 LEAK = {"piston_leakage": {"C": 2e-11}}
+#: Where the boom's identified parameters live in its SSP (``excavator_boom.ssp``, as params.ssv binds them)
+SSP_NAMES = {"K_v": "boom_load.K_v", "F_s": "boom_load.F_s", "F_d": "boom_load.F_d",
+             "F_L": "boom_load.F_L", "M": "boom_load.M", "A_max": "valve.A_max"}
 
 
 def test_one_machine_class_and_one_reference_module():
@@ -25,6 +27,9 @@ def test_one_machine_class_and_one_reference_module():
         importlib.import_module("boomfmi.model.excavator_reference")
     with pytest.raises(ModuleNotFoundError):                 # the linkage is physics/linkage.py
         importlib.import_module("boomfmi.physics.excavator")
+    for gone in ("boomfmi.identify.excavator", "boomfmi.identify.excavator_outputs"):   # folded into identify/
+        with pytest.raises(ModuleNotFoundError):
+            importlib.import_module(gone)
     assert M.ExcavatorMachine is M.Machine
     assert R.simulate_excavator_reference is R.simulate_linkage
     assert type(M.excavator_machine()) is type(M.boom_machine(Model())) is M.Machine
@@ -39,7 +44,7 @@ def test_naming_rule_one_joint_bare_more_joints_suffixed():
     assert boom.channel("angle", "boom") == "alpha" and ex.channel("angle", "boom") == "angle_boom"
     assert boom.param_name("K_v", "boom") == "K_v" and ex.param_name("K_v", "arm") == "K_v_arm"
     # the boom's SSP names are identification's, the excavator's the linkage's options
-    assert {p: boom.ssp_name(p) for p in SSP_NAMES} == SSP_NAMES
+    assert {p: boom.ssp_name(p) for p in SSP_NAMES} == SSP_NAMES     # the names identify's params.ssv binds
     assert ex.ssp_name("F_s_arm") == "linkage.F_s_arm" and ex.ssp_name("A_max_arm") == "valve_arm.A_max"
     assert boom.fmu_variable("valve_dynamics", "tau", "boom") == fmu_variable("valve_dynamics", "tau")
     assert ex.fmu_variable("valve_dynamics", "tau", "arm") == "valve_arm.tau_spool"

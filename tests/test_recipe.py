@@ -193,7 +193,7 @@ def test_the_layering_check_finds_an_import_the_table_does_not_list(tmp_path, mo
     (tmp_path / "docs").mkdir()
     (tmp_path / "docs" / "architecture.md").write_text(doc.replace(row, cut))
     monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
-    with pytest.raises(AssertionError, match=r"identify/excavator_outputs\.py:\d+: identify imports model"):
+    with pytest.raises(AssertionError, match=r"identify/outputs\.py:\d+: identify imports model"):
         test_the_imports_follow_the_architecture_table()
 
 

@@ -16,7 +16,7 @@ from boomfmi.model import Model
 from boomfmi.model.reference import simulate_reference
 from boomfmi.rig import RigConfig, Sample, VirtualRig, load_config
 from boomfmi.rig import truth as rt
-from boomfmi.rig.config import EFFECTS
+from boomfmi.rig.config import RIG_EFFECTS as EFFECTS
 from boomfmi.rig.plant import ALPHA_LSB, P_LSB
 
 ROOT = Path(__file__).resolve().parents[1]

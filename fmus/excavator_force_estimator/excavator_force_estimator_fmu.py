@@ -3,9 +3,13 @@
 
 Per-joint load observers (each cylinder's equation of motion through the four-joint
 linkage, read backwards from the measured pressures and angles with the identified
-friction per cylinder and the payload) combined into the tip force by least squares over
-the Jacobian transpose (four joints, three unknowns); ``residual`` is the misfit of the
-four equations [N m].  ``physics/force_estimation.py`` holds the physics.  The measured
+friction per cylinder and the payload) combined into the tip force: the sliding joints'
+equations and the previous estimate by least squares within the set of forces
+consistent with the sample (``consistent_tip_force``: a sticking joint's friction band, a
+stop's one side), the least-squares guess over the Jacobian transpose (``rest_weight``,
+``stop_weight``) weighted by ``f_guess``, the previous estimate by ``f_rate`` where the
+set bounds an axis; ``residual`` is the guess's misfit of the four equations [N m].
+``physics/force_estimation.py`` holds the physics.  The measured
 angles pass a critically damped second-order filter (``f_motion``; the swing's
 ``f_motion_swing``), the pneumatic forces the same filter; the estimate then a
 first-order low-pass (``tau_est``).  ``f_reflect_*``, the joystick's 3-axis force
@@ -44,9 +48,10 @@ import numpy as np
 from boomfmi_excavator_force_estimator_lib.fmislave import BoomSlave, input, output, parameter
 from boomfmi_excavator_force_estimator_lib.physics import reference_rig
 from boomfmi_excavator_force_estimator_lib.physics.linkage import JOINTS, Excavator, check_excavator
-from boomfmi_excavator_force_estimator_lib.physics.force_estimation import (BAND_RATE, BAND_SLIDE, F_BOUND, F_MOTION,
-                                                                            F_MOTION_SWING, T_HOLD, observer_start,
-                                                                            observer_step, reflected_force)
+from boomfmi_excavator_force_estimator_lib.physics.force_estimation import (BAND_RATE, BAND_SLIDE, F_BOUND, F_GUESS,
+                                                                            F_MOTION, F_MOTION_SWING, F_RATE, T_HOLD,
+                                                                            TAU_EST, observer_start, observer_step,
+                                                                            reflected_force)
 from boomfmi_excavator_force_estimator_lib.physics.validation import require_non_negative, require_positive
 
 _EX = Excavator()
@@ -99,9 +104,14 @@ class ExcavatorForceEstimator(BoomSlave):
                   "boom, arm and bucket angles and their pneumatic forces", min=0.0),
         parameter("f_motion_swing", F_MOTION_SWING, "Hz", "the same filter's corner for the swing (its row alone "
                   "feels the lateral force)", min=0.0),
-        parameter("tau_est", 0.004, "s", "time constant of the estimate's low-pass; 0: none", min=0.0),
-        parameter("rest_weight", 0.3, "1", "least-squares weight of a joint at rest (1: a sliding joint's)", min=0.0),
-        parameter("stop_weight", 0.02, "1", "least-squares weight of a joint at an end stop", min=0.0),
+        parameter("tau_est", TAU_EST, "s", "time constant of the estimate's low-pass; 0: none", min=0.0),
+        parameter("rest_weight", 0.3, "1", "least-squares guess's weight of a joint at rest (1: a sliding joint's)",
+                  min=0.0),
+        parameter("stop_weight", 0.02, "1", "least-squares guess's weight of a joint at an end stop", min=0.0),
+        parameter("f_rate", F_RATE, "N/s", "how fast the tip force may plausibly change: the previous estimate's "
+                  "weight where the consistent set bounds an axis", min=0.0),
+        parameter("f_guess", F_GUESS, "N", "the least-squares guess's weight (its tolerance) in the estimate",
+                  min=0.0),
         parameter("v_info", 1e-3, "m/s", "above this piston speed (by both filters) a sliding joint is informative",
                   min=0.0),
         parameter("f_info", 3.0, "Hz", "corner frequency of the slower filter of the angles that tells sliding joints",
@@ -137,7 +147,8 @@ class ExcavatorForceEstimator(BoomSlave):
         for name in ("payload", "tau_est", "rest_weight", "stop_weight", "gain", "v_info", "band_slide", "band_rate",
                      "t_hold"):
             require_non_negative(name, getattr(self, name))
-        for name in ("f_motion", "f_motion_swing", "f_info", "f_max", "rate_max", "P_atm", "f_bound"):
+        for name in ("f_motion", "f_motion_swing", "f_info", "f_max", "rate_max", "P_atm", "f_bound", "f_rate",
+                     "f_guess"):
             require_positive(name, getattr(self, name))
         acts = {j: replace(getattr(_EX, j), K_v=getattr(self, f"K_v_{j}"), F_s=getattr(self, f"F_s_{j}"),
                            F_d=getattr(self, f"F_d_{j}")) for j in JOINTS}
@@ -149,7 +160,7 @@ class ExcavatorForceEstimator(BoomSlave):
                                 tau_est=self.tau_est, rest_weight=self.rest_weight,
                                 stop_weight=self.stop_weight, v_info=self.v_info, f_info=self.f_info,
                                 band_slide=self.band_slide, band_rate=self.band_rate, f_bound=self.f_bound,
-                                t_hold=self.t_hold)
+                                t_hold=self.t_hold, f_rate=self.f_rate, f_guess=self.f_guess)
         self._reset()
 
     def step(self, t, dt):

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -195,10 +196,10 @@ def _view(args) -> int:
             raise ValueError("--model simulates the identified machine on a recording: give --replay "
                              "RECORDING.csv (the excavator's)")
         import tempfile
-        from .identify.excavator_outputs import write_excavator_run
+        from .identify import write_run
         with tempfile.TemporaryDirectory(prefix="boomfmi-run-") as tmp:
             out = args.write_run or Path(tmp) / f"{args.replay.stem}_run.csv"
-            run = write_excavator_run(args.replay, args.model, out, progress=_progress("view"))
+            run = write_run(args.replay, args.model, out, progress=_progress("view"))
             if args.write_run:
                 print(f"wrote {run}: the machine identified in {args.model} beside {args.replay}, "
                       f"f_tip_est and its interval")
@@ -253,7 +254,8 @@ def _rig_serve(args) -> int:
 
 def _record(args) -> int:
     from .record import record_experiment
-    _not_inputs([args.out], [args.fmu, args.key_file])
+    command_csv = [Path(args.experiment)] if args.experiment.lower().endswith(".csv") else []   # a command CSV
+    _not_inputs([args.out], [args.fmu, args.key_file, *command_csv])
     stats = record_experiment(args.fmu, args.rig, args.out, args.experiment, args.step, args.stop,
                               args.key_file, args.timeout, args.retries, args.loss_budget, _machine(args))
     print(f"wrote {args.out}: {stats['rows']} rows, {stats['lost_packets']} answers lost")
@@ -267,42 +269,12 @@ def _identify(args) -> int:
                                 f"go beside it)")
     _not_inputs([args.out, args.out.with_suffix(".ssv"), args.out.with_suffix(".png")],
                 recordings=[*args.recordings, *args.holdout])
-    if common_kind([*args.recordings, *args.holdout]) == "excavator":
-        return _identify_excavator(args)
-    from .identify import identify_recordings, write_outputs
-    from .identify.preprocess import ABS_FLOOR, NOISE_FACTOR
-    result, recs, _ = identify_recordings(args.recordings, args.method, args.a_max, args.cutoff, args.eq13,
-                                          machine=_machine(args))
-    doc = write_outputs(result, recs, args.out, args.holdout)
-    print(f"{result.method}: " + ", ".join(
-        f"{k} = {e.value:.4g} {e.unit}" + (f" [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]" if e.ci95[0] == e.ci95[0] else "")
-        for k, e in result.params.items()))
-    for w in result.warnings:
-        print(f"warning: {w}")
-    for path, err in doc.get("nrmse_holdout", {}).items():
-        print(f"holdout {path}: NRMSE x {100 * err['x']:.2f} %, p_a {100 * err['p_a']:.2f} %, p_b {100 * err['p_b']:.2f} %")
-        gap = doc["holdout_gap"][path]
-        floor = (f"{100 * gap['threshold']:.2f} % ({NOISE_FACTOR:g} times the recording's noise floor, "
-                 f"{100 * gap['noise_floor_sum']:.2f} %, plus {100 * ABS_FLOOR:g} %)")
-        if gap["beyond_noise"]:
-            print(f"  large: {100 * gap['nrmse_sum']:.2f} % in all, beyond {floor}; the model misses an effect: "
-                  f"`boomfmi diagnose {' '.join(str(p) for p in args.recordings)} --holdout {path} --out DIR` names it")
-        else:
-            print(f"  within the noise: {100 * gap['nrmse_sum']:.2f} % in all, under {floor}")
-    print("wrote " + ", ".join(doc["written"]))
-    return 0
-
-
-def _identify_excavator(args) -> int:
-    """``identify`` on the whole excavator's recordings: each cylinder's friction and the payload."""
-    if args.method != "fit" or args.a_max:
-        raise ValueError("the whole excavator's recordings are identified by the fit per joint (K_v, F_s, F_d of "
-                         "each cylinder and the payload): --method paper and --a-max are the boom's")
-    from .identify.excavator_outputs import identify_excavator_recordings, summary_lines, write_excavator_outputs
+    common_kind([*args.recordings, *args.holdout])      # the boom's or the excavator's: a mix is refused
+    from .identify import identify_recordings, summary_lines, write_outputs
     say = _progress("identify")
-    say(f"identifying the whole excavator per joint on {len(args.recordings)} recording(s)")
-    result, recs, ex = identify_excavator_recordings(args.recordings, args.cutoff, machine=_machine(args))
-    doc = write_excavator_outputs(result, recs, args.out, args.holdout, ex, progress=say)
+    result, recs, _ = identify_recordings(args.recordings, args.method, args.a_max, args.cutoff, args.eq13,
+                                          machine=_machine(args), progress=say)
+    doc = write_outputs(result, recs, args.out, args.holdout, progress=say)
     for line in summary_lines(doc):
         print(line)
     print("wrote " + ", ".join(doc["written"]))
@@ -313,12 +285,19 @@ def _diagnose(args) -> int:
     from .diagnose.report import OUTPUTS
     from .recording import common_kind
     _not_inputs([args.out / name for name in OUTPUTS], [args.ssp], [*args.recordings, *args.holdout])
+    if args.propose is not None:
+        _not_inputs([args.propose], [args.ssp], [*args.recordings, *args.holdout])
+        from .outputs import OutputError
+        clash = [args.out / n for n in OUTPUTS if os.path.realpath(args.out / n) == os.path.realpath(args.propose)]
+        if clash:
+            raise OutputError(f"--propose {args.propose}: that is the diagnosis' own {clash[0]}; give the "
+                              f"command CSV another name")
     if common_kind([*args.recordings, *args.holdout]) == "excavator":
         return _diagnose_excavator(args)
     from .diagnose import diagnose
     doc = diagnose(args.recordings, args.holdout, args.out, ssp=args.ssp,
                    progress=lambda text: print(f"diagnose: {text}", file=sys.stderr, flush=True),
-                   machine=_machine(args))
+                   machine=_machine(args), propose=args.propose)
     for w in (doc.get("baseline") or {}).get("warnings", []):
         print(f"warning (baseline): {w}")
     if not doc["judgeable"]:
@@ -341,6 +320,13 @@ def _diagnose(args) -> int:
             print(f"not confirmed through the FMUs: {c.get('skipped') or c.get('error')}")
     from .diagnose.report import action_sentence
     print(action_sentence(doc))
+    n = doc.get("next_experiment")
+    if n:
+        print(f"next experiment: {n['design']} {n['params']} tells {n['hypotheses'][0]} from {n['hypotheses'][1]} "
+              f"(expected log-likelihood ratio {n['separation']:.3g})" + (f"; its command: {n['csv']}" if n.get("csv")
+                                                                           else ""))
+    elif args.propose is not None:
+        print(f"no experiment proposed, {args.propose} not written: no two explanations to tell apart")
     print(f"wrote {args.out}/diagnosis.json and {args.out}/report.html")
     return 0
 
@@ -350,6 +336,9 @@ def _diagnose_excavator(args) -> int:
     if args.ssp is not None:
         raise ValueError("--ssp confirms a boom verdict through the boom's FMUs; the whole excavator's per-joint "
                          "diagnosis has no confirmation through the FMUs")
+    if args.propose is not None:
+        raise ValueError("--propose designs the boom's next experiment; the whole excavator's per-joint diagnosis "
+                         "proposes none")
     from .diagnose.excavator_report import diagnose_excavator_recordings, summary_lines
     doc = diagnose_excavator_recordings(args.recordings, args.holdout, args.out, progress=_progress("diagnose"))
     for line in summary_lines(doc):
@@ -532,9 +521,21 @@ def _bench_leak(args) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The whole command line's parser, built without running anything (tests/test_readme.py parses
-    every command of the README with it)."""
+    every command of the README with it): the options of every command, then each command's own
+    parser from its builder (``COMMANDS``: ``_simulate_parser(sub)``, ...)."""
     parser = argparse.ArgumentParser(prog="boomfmi", description=__doc__.splitlines()[0])
+    parser.add_argument("--effects", type=Path, action="append", default=[], metavar="FILE",
+                        help="a Python file of your own effects (a plug-in: effects(catalogue), rig_effects(truth)) "
+                             "for every command; repeatable (installed plug-ins, entry point boomfmi.effects, "
+                             "load by themselves)")
     sub = parser.add_subparsers(dest="command", required=True)
+    for add in COMMANDS:
+        add(sub)
+    return parser
+
+
+def _simulate_parser(sub) -> None:
+    """``boomfmi simulate``: an experiment on an SSP."""
     p = sub.add_parser("simulate", help="run an experiment on an SSP system, write a recording-format CSV")
     p.add_argument("ssp", type=Path, help="the system, e.g. build/excavator_boom.ssp")
     p.add_argument("--experiment", default="paper_multistep",
@@ -558,6 +559,10 @@ def build_parser() -> argparse.ArgumentParser:
                                       "(default: $BOOMFMI_LINK_KEY)")
     p.add_argument("--out", type=Path, required=True, help="output CSV (recording columns plus x, v)")
     p.set_defaults(run=_simulate)
+
+
+def _rig_parser(sub) -> None:
+    """``boomfmi rig``: the virtual rig."""
     p = sub.add_parser("rig", help="the virtual rig")
     rig_sub = p.add_subparsers(dest="rig_command", required=True)
     p = rig_sub.add_parser("serve", help="simulate the machine behind an authenticated UDP link")
@@ -573,6 +578,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run under the real-time scheduler (SCHED_FIFO) at priority N, 1 to 99 (needs the "
                         "right: root or CAP_SYS_NICE); 0: the normal scheduler (default)")
     p.set_defaults(run=_rig_serve)
+
+
+def _record_parser(sub) -> None:
+    """``boomfmi record``: an experiment on a rig through the hardware bridge."""
     p = sub.add_parser("record", help="run an experiment on a rig through the hardware bridge, write a recording")
     p.add_argument("--experiment", default="paper_multistep")
     p.add_argument("--rig", required=True, help="udp://HOST:PORT")
@@ -589,6 +598,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--loss-budget", type=int, default=20, help="consecutive lost answers before giving up")
     _add_machine_option(p, "written into the recording's sidecar")
     p.set_defaults(run=_record)
+
+
+def _identify_parser(sub) -> None:
+    """``boomfmi identify``: identification."""
     p = sub.add_parser("identify", help="identify the model's parameters from recordings (the boom's, or the whole "
                                         "excavator's: each cylinder's K_v, F_s, F_d and the payload)")
     p.add_argument("recordings", nargs="+", type=Path)
@@ -603,6 +616,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, required=True, help="params.json (params.ssv and params.png go beside it)")
     _add_machine_option(p, "the recordings are of (default: their sidecars, else the reference rig)")
     p.set_defaults(run=_identify)
+
+
+def _diagnose_parser(sub) -> None:
+    """``boomfmi diagnose``: diagnosis."""
     p = sub.add_parser("diagnose", help="where the model and the machine disagree, and which effect explains it "
                                         "(for the whole excavator's recordings: which joint, and which effect)")
     p.add_argument("recordings", nargs="+", type=Path, help="FIT recordings: identify the baseline, fit the effects")
@@ -611,8 +628,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--ssp", type=Path, default=None,
                    help="the boom's SSP for confirming the verdict through the FMUs (default: build/excavator_boom.ssp)")
+    p.add_argument("--propose", type=Path, default=None, metavar="FILE",
+                   help="write the command CSV (t, u) of the experiment that best tells the two most probable "
+                        "explanations apart, for `boomfmi record --experiment FILE` (the report proposes one by "
+                        "itself where they are within a factor of 10, or where the verdict is unexplained)")
     _add_machine_option(p, "the recordings are of (default: their sidecars, else the reference rig)")
     p.set_defaults(run=_diagnose)
+
+
+def _campaign_parser(sub) -> None:
+    """``boomfmi campaign``: a campaign on Dask."""
     p = sub.add_parser("campaign", help="identify and diagnose many machines and dates on Dask; trends and flags")
     p.add_argument("manifest", type=Path, help="CSV: machine, date, role (fit or holdout), recording[, sidecar]")
     p.add_argument("--out", type=Path, required=True,
@@ -625,6 +650,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the boom's SSP for each verdict's confirmation through the FMUs "
                         "(default: build/excavator_boom.ssp)")
     p.set_defaults(run=_campaign)
+
+
+def _fleet_parser(sub) -> None:
+    """``boomfmi fleet``: a virtual fleet."""
     p = sub.add_parser("fleet", help="a virtual fleet (the virtual rig, known changes) for campaign's demo")
     p.add_argument("--machines", type=int, default=8)
     p.add_argument("--weeks", type=int, default=6)
@@ -633,6 +662,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=None, help="processes recording (default: one per core)")
     p.add_argument("--out", type=Path, required=True, help="folder: recordings, manifest.csv, truth.json")
     p.set_defaults(run=_fleet)
+
+
+def _view_parser(sub) -> None:
+    """``boomfmi view``: the virtual view."""
     p = sub.add_parser("view", help="the virtual boom or whole excavator in a browser, from a run file or live; "
                                     "or a video of either")
     source = p.add_mutually_exclusive_group(required=True)
@@ -667,6 +700,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "`boomfmi view --replay RUN.csv`")
     p.set_defaults(run=_view)
 
+
+def _recording_parser(sub) -> None:
+    """``boomfmi recording``: recordings."""
     p = sub.add_parser("recording", help="recordings: import a foreign measurement file")
     rec_sub = p.add_subparsers(dest="recording_command", required=True)
     p = rec_sub.add_parser("import", help="convert a delimited text file into the recording format, by a column map")
@@ -675,6 +711,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, required=True, help="the recording to write (CSV)")
     _add_machine_option(p, "written as the recording's sidecar (its P_atm converts gauge and absolute pressures)")
     p.set_defaults(run=_recording_import)
+
+
+def _machine_parser(sub) -> None:
+    """``boomfmi machine``: the machine file."""
     p = sub.add_parser("machine", help="describe your machine in one file (for --machine)")
     m_sub = p.add_subparsers(dest="machine_command", required=True)
     p = m_sub.add_parser("init", help="write a machine file at the reference's values, for you to edit")
@@ -686,6 +726,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = m_sub.add_parser("check", help="read and check a machine file; print its values in SI units")
     p.add_argument("file", type=Path)
     p.set_defaults(run=_machine_check)
+
+
+def _bench_parser(sub) -> None:
+    """``boomfmi bench``: the test bench."""
     p = sub.add_parser("bench", help="the test bench: friction and leak-down tests of a cylinder")
     bench_sub = p.add_subparsers(dest="bench_command", required=True)
     p = bench_sub.add_parser("friction", help="fit the friction laws (eq9, stribeck, pressure), score them on "
@@ -713,21 +757,45 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.set_defaults(run=_bench_leak)
 
+
+def _describe_parser(sub) -> None:
+    """``boomfmi describe``: FMU interfaces."""
     p = sub.add_parser("describe", help="print FMU interfaces as Markdown tables")
     p.add_argument("fmus", nargs="+", type=Path)
     p.set_defaults(run=_describe)
+
+
+def _check_parser(sub) -> None:
+    """``boomfmi check``: FMU validation."""
     p = sub.add_parser("check", help="validate FMUs and replay their reference results")
     p.add_argument("fmu_dir", type=Path)
     p.add_argument("--references", type=Path, default=None,
                    help="folder with <name>/<name>_in.csv and _ref.csv (default: the checkout's fmus/, "
                         "whatever the working directory)")
     p.set_defaults(run=_check)
-    return parser
+
+
+#: One parser builder per command, in the order ``boomfmi --help`` lists them.
+COMMANDS = (_simulate_parser, _rig_parser, _record_parser, _identify_parser, _diagnose_parser, _campaign_parser,
+            _fleet_parser, _view_parser, _recording_parser, _machine_parser, _bench_parser, _describe_parser,
+            _check_parser)
+
+
+def _effects(args) -> None:
+    """``--effects FILE``: loaded here and named in ``$BOOMFMI_EFFECTS`` for the processes
+    a command starts (Dask workers, FMU builds)."""
+    if not args.effects:
+        return
+    from .model.catalogue import EFFECTS_ENV, load_plugins
+    files = [str(f.resolve()) for f in args.effects]
+    os.environ[EFFECTS_ENV] = os.pathsep.join([*filter(None, [os.environ.get(EFFECTS_ENV)]), *files])
+    load_plugins(files)
 
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
+        _effects(args)                   # the user's effect plug-ins, before anything reads the catalogue
         _machine(args)                   # a machine file is checked before any work
         return args.run(args)
     except (OSError, ValueError, RuntimeError, KeyError, LinkError) as e:
@@ -736,6 +804,9 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:            # Ctrl-C, SIGINT: every command says so, no traceback, 128 + 2
         print(f"\nboomfmi {args.command}: interrupted", file=sys.stderr, flush=True)
         return 130
+
+
+__all__ = ["COMMANDS", "build_parser", "main"]
 
 
 if __name__ == "__main__":

@@ -156,3 +156,7 @@ def shrink(before: dict, after: dict) -> float:
     """``1 - (error after) / (error before)``, the errors (NRMSE per channel) summed over
     the channels: the share of the gap an effect removes."""
     return 1.0 - sum(after.values()) / max(sum(before.values()), 1e-12)
+
+
+__all__ = ["CHANNELS", "PRESSURES", "rig_model", "model_for", "initial_state", "U_STEP", "simulate_recording",
+           "recorded", "RAIL_SHARE", "as_sensed", "nrmse", "shrink"]

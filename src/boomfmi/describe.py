@@ -49,3 +49,6 @@ def interfaces_document(paths) -> str:
             "are declared from the catalogue of effects (`src/boomfmi/model/catalogue.py`); their forms are "
             "in `src/boomfmi/physics/effects.py`:\n\n" + options + "\n")
     return head + "".join("\n" + interface_table(p) for p in sorted(paths, key=lambda p: Path(p).stem))
+
+
+__all__ = ["interface_table", "INTERFACES_DOC", "interfaces_document"]

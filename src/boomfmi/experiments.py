@@ -187,6 +187,123 @@ def sine_sweep(seed: int = 0, duration: float = 12.0) -> Callable[[float], dict]
     return profile
 
 
+#: Feedback taps of the maximum-length linear feedback shift registers by register
+#: length n (x^n + x^m + 1, the XOR of bits n and m): a sequence of period 2^n - 1.
+MLS_TAPS = {5: 3, 6: 5, 7: 6, 9: 5, 10: 7, 11: 9}
+
+
+def mls(n: int = 9, seed: int = 1) -> np.ndarray:
+    """One period (2^n - 1 bits, 0 or 1) of the maximum-length sequence of the n-bit
+    Fibonacci shift register of :data:`MLS_TAPS`, started from the non-zero state
+    ``seed`` mod (2^n - 1) + 1.  Balanced (2^(n-1) ones) with a two-valued circular
+    autocorrelation: the pseudo-random binary sequence (PRBS) of system identification."""
+    if n not in MLS_TAPS:
+        raise ValueError(f"no maximum-length taps for a {n!r}-bit register; known: {', '.join(map(str, MLS_TAPS))}")
+    m, period = MLS_TAPS[n], 2 ** n - 1
+    state = [(int(seed) % period + 1) >> i & 1 for i in range(n)]
+    out = np.empty(period, dtype=int)
+    for k in range(period):
+        out[k] = state[-1]
+        bit = state[n - 1] ^ state[m - 1]
+        state = [bit] + state[:-1]
+    return out
+
+
+def pseudo_random_steps(seed: int = 0, duration: float = 12.0, clock: float = 0.12, levels: int = 2,
+                        amplitude=(1.2, 3.0), n: int = 9) -> Callable[[float], dict]:
+    """Pseudo-random steps of the command around the centre, switching only at multiples
+    of ``clock`` [s] (the sequence's clock; 0.12 s: a flat spectrum up to ~0.4 / clock =
+    3.3 Hz).  ``levels = 2``: a pseudo-random binary sequence (PRBS), u = 5 - a [V] for a
+    1 bit (extending) and 5 + a for a 0 bit (retracting), the bits the n-bit maximum-length
+    sequence of :func:`mls` from a start drawn from ``seed``; ``levels > 2``: a
+    pseudo-random multi-level sequence, each clock period one of ``levels`` commands
+    evenly spaced over 5 - a .. 5 + a drawn from ``seed``.  The amplitude a [V] is drawn
+    per design from ``amplitude`` (within 0 .. 5 V, so that u stays within 0 .. 10 V)."""
+    if not clock > 0:
+        raise ValueError(f"clock is the sequence's period [s]: > 0, not {clock!r}")
+    if int(levels) != levels or levels < 2:
+        raise ValueError(f"levels is a whole number >= 2, not {levels!r}")
+    lo_a, hi_a = (float(a) for a in amplitude)
+    if not 0.0 < lo_a <= hi_a <= 5.0:
+        raise ValueError(f"amplitude [V] is a range within (0, 5], not {amplitude!r}")
+    rng = np.random.default_rng(seed)
+    amp = float(rng.uniform(lo_a, hi_a))
+    count = int(math.ceil(duration / clock))
+    if levels == 2:
+        bits = mls(n, int(rng.integers(2 ** n - 1)))
+        values = np.where(np.resize(bits, count) == 1, 5.0 - amp, 5.0 + amp)
+    else:
+        values = 5.0 + amp * np.linspace(-1.0, 1.0, int(levels))[rng.integers(int(levels), size=count)]
+    values = [float(v) for v in values]
+
+    def profile(t: float) -> dict:
+        return {"u": values[min(max(int(t / clock + 1e-9), 0), count - 1)]}
+    profile.duration = duration
+    profile.breakpoints = [k * clock for k in range(1, count) if values[k] != values[k - 1]]
+    profile.amplitude = amp
+    return profile
+
+
+def joystick(seed: int = 0, duration: float = 12.0, bandwidth=(0.4, 1.2), step: float = 0.02,
+             gain: float = 0.9, held=(0.6, 2.5), released=(0.3, 1.2), tau_return: float = 0.08,
+             detent: float = 0.03) -> Callable[[float], dict]:
+    """An operator on a spring-centred joystick, sampled by the machine's controller every
+    ``step`` [s] (the command a staircase of that period): the hand's motion is white
+    noise through a critically damped second-order low-pass of corner f_c [Hz] (drawn per
+    design from ``bandwidth``), scaled so that its deflection's standard deviation is 0.7
+    of full travel, then held at the stick's mechanical stops (+-1, saturation).  The
+    operator holds the stick for ``held`` [s] and lets it go for ``released`` [s] (each
+    drawn), and while released the stick's spring returns it to centre with time constant
+    ``tau_return`` [s] (and the hand, taking it again, joins it over ~0.15 s); within
+    ``detent`` of centre it rests in its detent (exactly 5 V).
+    u = 5 - 5 ``gain`` deflection [V] (a deflection forward extends the cylinder), within
+    5 -+ 5 ``gain``, so within 0 .. 10 V for gain <= 1."""
+    if not step > 0 or not 0.0 < gain <= 1.0 or not tau_return > 0 or not 0.0 <= detent < 1.0:
+        raise ValueError(f"joystick needs step > 0 s, 0 < gain <= 1, tau_return > 0 s and 0 <= detent < 1; "
+                         f"got step={step!r}, gain={gain!r}, tau_return={tau_return!r}, detent={detent!r}")
+    rng = np.random.default_rng(seed)
+    f_c = float(rng.uniform(*bandwidth))
+    count = int(math.ceil(duration / step)) + 1
+    w = 2.0 * math.pi * f_c
+    # the hand: white noise through two first-order stages of corner f_c (critically damped)
+    a = math.exp(-w * step)
+    noise = rng.standard_normal(count)
+    y1 = np.empty(count)
+    y2 = np.empty(count)
+    s1 = s2 = 0.0
+    for k in range(count):
+        s1 = a * s1 + (1.0 - a) * noise[k]
+        s2 = a * s2 + (1.0 - a) * s1
+        y1[k], y2[k] = s1, s2
+    hand = 0.7 * y2 / (float(np.std(y2)) or 1.0)
+    # holding and letting go: the stick follows the hand while held, its spring otherwise
+    grip = np.zeros(count, dtype=bool)
+    t, on = 0.0, True
+    while t < duration + step:
+        dt_ = float(rng.uniform(*(held if on else released)))
+        grip[int(t / step):int((t + dt_) / step) + 1] = on
+        t, on = t + dt_, not on
+    r = math.exp(-step / tau_return)
+    stick = np.empty(count)
+    s, since = 0.0, 0
+    for k in range(count):
+        if grip[k]:          # the hand takes the stick from where it is, over ~0.15 s
+            since += 1
+            g = 1.0 - math.exp(-since * step / 0.15)
+            s = (1.0 - g) * s + g * float(np.clip(hand[k], -1.0, 1.0))
+        else:
+            since, s = 0, r * s
+        stick[k] = 0.0 if abs(s) < detent else s
+    values = [float(5.0 - 5.0 * gain * v) for v in stick]
+
+    def profile(t: float) -> dict:
+        return {"u": values[min(max(int(t / step + 1e-9), 0), count - 1)]}
+    profile.duration = duration
+    profile.breakpoints = [k * step for k in range(1, count) if k * step < duration and values[k] != values[k - 1]]
+    profile.bandwidth = f_c
+    return profile
+
+
 def dig() -> Callable[[float], dict]:
     """An operator's digging cycle for force estimation (teleoperation), 10 s, from the
     boom held at mid-stroke (x0 = 50 mm in the contact scenarios): lower it gently into
@@ -206,10 +323,68 @@ PROFILES = {"paper_multistep": paper_multistep, "holdout_multistep": holdout_mul
 
 
 def profile(name: str) -> Callable[[float], dict]:
-    """A named profile; raises ValueError listing the known names."""
+    """A named profile, or a command CSV (a name ending in ``.csv``: :func:`command_file`);
+    raises ValueError listing the known names."""
+    if name not in PROFILES and str(name).lower().endswith(".csv"):
+        return command_file(name)
     if name not in PROFILES:
-        raise ValueError(f"unknown experiment {name!r}; known: {', '.join(PROFILES)}")
+        raise ValueError(f"unknown experiment {name!r}; known: {', '.join(PROFILES)} or a command CSV (t, u)")
     return PROFILES[name]()
+
+
+#: a command CSV's columns: time [s] from 0, command [V] (``diagnose --propose`` writes one)
+COMMAND_COLUMNS = ("t", "u")
+
+
+def command_samples(prof: Callable[[float], dict], dt: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
+    """A profile sampled as the DAQ sends it: times ``0, dt, ...`` up to its duration and
+    the command ``u`` [V] at each (held until the next sample)."""
+    t = np.round(np.arange(int(round(prof.duration / dt)) + 1) * dt, 9)
+    return t, np.array([float(prof(float(s))["u"]) for s in t])
+
+
+def command_file(path) -> Callable[[float], dict]:
+    """A command CSV (header ``t,u``: time [s] from 0, strictly rising; command [V],
+    0 to 10) as a profile: each sample's command held until the next (as the rig's output
+    card holds it), the last to the end.  Errors name the file, line and column."""
+    import csv
+    where = str(path)
+    try:
+        with open(path, newline="") as f:
+            rows = list(csv.reader(f))
+    except OSError as e:
+        raise ValueError(f"{where}: cannot read the command CSV: {e.strerror or e}") from None
+    if not rows or [c.strip() for c in rows[0]][:2] != list(COMMAND_COLUMNS):
+        raise ValueError(f"{where}, line 1: a command CSV starts with the header "
+                         f"{','.join(COMMAND_COLUMNS)} (time [s], command [V])")
+    times, levels = [], []
+    for line, row in enumerate(rows[1:], start=2):
+        if not any(c.strip() for c in row):
+            continue
+        for col, text in zip(COMMAND_COLUMNS, (row + ["", ""])[:2]):
+            try:
+                v = float(text)
+            except ValueError:
+                raise ValueError(f"{where}, line {line}, column {col!r}: {text!r} is not a number") from None
+            if not math.isfinite(v):
+                raise ValueError(f"{where}, line {line}, column {col!r}: {text!r} is not finite")
+            (times if col == "t" else levels).append(v)
+        if not 0.0 <= levels[-1] <= 10.0:
+            raise ValueError(f"{where}, line {line}, column 'u': {levels[-1]:g} V is outside the valve's 0 to 10 V")
+        if len(times) == 1 and times[0] != 0.0:
+            raise ValueError(f"{where}, line {line}, column 't': the command starts at t = 0, not {times[0]:g} s")
+        if len(times) > 1 and times[-1] <= times[-2]:
+            raise ValueError(f"{where}, line {line}, column 't': {times[-1]:g} s does not follow "
+                             f"{times[-2]:g} s (times rise strictly)")
+    if len(times) < 2:
+        raise ValueError(f"{where}: a command CSV needs at least two samples")
+    t_arr, u_arr = np.asarray(times), np.asarray(levels)
+
+    def prof(t: float) -> dict:
+        return {"u": float(u_arr[max(0, int(np.searchsorted(t_arr, t + 1e-9, side="right")) - 1)])}
+    prof.duration = float(t_arr[-1])
+    prof.breakpoints = [float(s) for s, d in zip(t_arr[1:], np.diff(u_arr)) if d != 0.0]
+    return prof
 
 
 # -- the whole excavator (shared/spec/excavator.md) ---------------------------------------------
@@ -634,3 +809,12 @@ def excavator_profile(name: str) -> Callable[[float], dict]:
     if name not in EXCAVATOR_PROFILES:
         raise ValueError(f"unknown excavator experiment {name!r}; known: {', '.join(EXCAVATOR_PROFILES)}")
     return EXCAVATOR_PROFILES[name]()
+
+
+__all__ = ["PAPER_LEVELS", "multistep", "paper_multistep", "holdout_multistep", "random_steps", "held", "slow_ramps",
+           "manoeuvres", "sine_sweep", "MLS_TAPS", "mls", "pseudo_random_steps", "joystick", "dig", "PROFILES",
+           "profile", "COMMAND_COLUMNS", "command_samples", "command_file", "JOINTS", "CENTRE", "held_joints", "DIG_CYCLE",
+           "digging_cycle", "per_joint", "excavator_random_steps", "excavator_manoeuvres", "excavator_excitation",
+           "TipContact", "CONTACTS", "contact", "JointTrajectoryController", "OPERATOR_GAINS", "DIG_TRAJECTORY",
+           "PUSH_TRAJECTORY", "closed_loop_dig", "closed_loop_hold", "TIP_FORCE_SCENARIOS", "tip_force_scenario",
+           "EXCAVATOR_PROFILES", "excavator_profile"]

@@ -505,3 +505,8 @@ class BoomSlave(_FmiSlave):
         self._time = current_time + step_size
         self._time_known = self._stepped = True
         return True
+
+
+__all__ = ["FMI_VERSION", "TIME_RTOL", "Variable", "parameter", "input", "output", "P_S_MAX", "K_MAX", "U_MIN",
+           "U_MAX", "RIG_PARAMETERS", "LOAD", "GEOMETRY", "CYLINDER", "rig_parameters", "effect_options",
+           "option_values", "BoomSlave"]

@@ -537,3 +537,7 @@ def check_time_scale(table: ForeignTable, t: np.ndarray, what: str, spacing: tup
             "larger unit than the map's (s or ms where it says ms or us?)"
         raise RecordingError(table.path, f"{text}: is the file's time in a {way} Give t's unit in --map (map "
                                          f"entry {table.entry_text('t')}), e.g. t=COLUMN:ms", column=label)
+
+
+__all__ = ["DELIMITERS", "QUANTITIES", "PRESETS", "units", "MapEntry", "ForeignTable", "parse_map", "read_foreign",
+           "read_options", "read_with", "recording_frame", "import_recording", "increasing_time", "check_time_scale"]

@@ -183,3 +183,7 @@ def assumption(recs, machine: MachineFile | None) -> str | None:
     return (f"no machine described (no --machine FILE and no sidecar rig values): assuming {what}; "
             f"describe yours with: boomfmi machine init --kind {'excavator' if kinds == {'excavator'} else 'boom'} "
             f"--out machine.json")
+
+
+__all__ = ["KINDS", "FILE_KEYS", "AGREE", "MachineError", "units_of", "reference_values", "MachineFile",
+           "read_machine", "machine_document", "assumption"]

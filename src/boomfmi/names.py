@@ -68,3 +68,6 @@ def member_problem(member) -> str | None:
                     f"(resources/valve.fmu), its parts letters, digits, '_', '-', '+' and '.', "
                     f"none starting with '.'")
     return None
+
+
+__all__ = ["MAX_NAME", "MAX_MEMBER", "PLAIN", "name_problem", "member_problem"]

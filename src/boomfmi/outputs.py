@@ -253,3 +253,6 @@ class OutputSet:
                 raise
         else:
             self.discard()
+
+
+__all__ = ["OutputError", "check_not_inputs", "clean_partials", "OutputLock", "check_not_folder", "OutputSet"]

@@ -51,3 +51,6 @@ def default_file(relative: str, option: str) -> Path:
         f"{'$' + BUILD_ENV if os.environ.get(BUILD_ENV, '').strip() else 'the checkout'}'s build folder "
         f"{build_dir()}): build it with `{how}` in {checkout()}, set ${BUILD_ENV} to the folder holding "
         f"it, or give {option}")
+
+
+__all__ = ["BUILD_ENV", "checkout", "build_dir", "built", "references_dir", "default_file"]

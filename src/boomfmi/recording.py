@@ -85,11 +85,13 @@ MAX_BYTES = 256 * 2**20
 MIN_SAMPLES = 100
 #: Sample spacing [s] a recording's t may have: the DAQ samples every 1 ms.
 DT_RANGE = (1e-5, 0.05)
-UNITS = {"t": "s", "u": "V", "p_a": "Pa (gauge)", "p_b": "Pa (gauge)", "alpha": "rad",
-         "f_ext": "N", "x": "m",
-         **{f"{q}_{j}": unit for j in JOINTS for q, unit in (("u", "V"), ("p_a", "Pa (gauge)"),
-                                                            ("p_b", "Pa (gauge)"), ("angle", "rad"), ("x", "m"))},
-         "f_tip_x": "N", "f_tip_y": "N", "f_tip_z": "N"}
+#: Each channel's unit as a recording's columns hold it (pressures gauge).
+CHANNEL_UNITS = {"t": "s", "u": "V", "p_a": "Pa (gauge)", "p_b": "Pa (gauge)", "alpha": "rad",
+                 "f_ext": "N", "x": "m",
+                 **{f"{q}_{j}": unit for j in JOINTS for q, unit in (("u", "V"), ("p_a", "Pa (gauge)"),
+                                                                    ("p_b", "Pa (gauge)"), ("angle", "rad"),
+                                                                    ("x", "m"))},
+                 "f_tip_x": "N", "f_tip_y": "N", "f_tip_z": "N"}
 #: The largest joint angle a recording may hold [rad]: beyond it, the angles are in degrees.
 MAX_ANGLE = 2 * math.pi
 #: How far [rad] the boom's angle may lie beyond its stroke's ends (Eq. 12 at x = 0 and
@@ -477,7 +479,7 @@ def _sample_keys(rec: Recording):
     cols = [c for c in (*spec["commands"], *spec["pressures"], *spec["angles"]) if c in rec.data]
     h = np.zeros(len(rec.data), dtype=np.uint64)
     for k, c in enumerate(cols):
-        q = np.round(rec.data[c].to_numpy(float) / OVERLAP_STEP[UNITS[c]]).astype(np.int64).view(np.uint64)
+        q = np.round(rec.data[c].to_numpy(float) / OVERLAP_STEP[CHANNEL_UNITS[c]]).astype(np.int64).view(np.uint64)
         h = _mix(h ^ _mix(q + np.uint64(k + 1)))
     keep = np.ones(len(h), dtype=bool)
     keep[1:] = h[1:] != h[:-1]
@@ -769,3 +771,12 @@ def write_recording(path, data, sidecar: dict | None = None) -> Path:
         for row in data[cols].itertuples(index=False):
             w.write(row)
     return Path(path)
+
+
+__all__ = ["REQUIRED", "RIG_KEYS", "RIG_UNITS", "EXCAVATOR_RIG_KEYS", "EXCAVATOR_RIG_UNITS", "OPTIONAL",
+           "EXCAVATOR_REQUIRED", "EXCAVATOR_OPTIONAL", "KINDS", "SIDECAR_KEYS", "MAX_BYTES", "MIN_SAMPLES", "DT_RANGE",
+           "CHANNEL_UNITS", "MAX_ANGLE", "ALPHA_MARGIN", "OVERLAP_SAMPLES", "OVERLAP_STEP", "recording_kind",
+           "read_header", "common_kind", "RecordingError", "Recording", "read_recording", "parse_recording",
+           "sidecar_path", "recording_inputs", "read_sidecar", "check_excavator_values", "check_rig_values",
+           "read_checked", "check_same_rig", "check_distinct", "check_no_duplicates", "shared_run", "max_bytes",
+           "read_experiment", "check_plausible", "RecordingWriter", "write_recording"]

@@ -369,3 +369,6 @@ class RigBridge(BoomSlave):
         if self._client is not None:
             self._client.close()
             self._client = None
+
+
+__all__ = ["link_variables", "sensor_options", "MACHINES", "channel", "channels", "bridge_variables", "RigBridge"]

@@ -274,3 +274,8 @@ def run_excavator(cosim, experiment: str, stop_time: float | None = None, progre
         else:
             out[name] = result[col] + offset
     return pd.DataFrame(out)
+
+
+__all__ = ["RECORDED", "JOINTS", "rig_parameters", "replay_parameters", "experiment_inputs", "live_columns",
+           "simulate_with_view", "bound_value", "STABLE_SHARE", "max_stable_step", "run_experiment",
+           "excavator_wiring", "excavator_inputs", "excavator_columns", "run_excavator"]

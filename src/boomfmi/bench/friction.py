@@ -63,8 +63,9 @@ FORMULAS = {
     "pressure": "F_f = sign(v) (F_d0 + c_d p) + K_v v sliding; at rest -(F_s0_neg + c_s_neg p) <= F_f <= "
                 "F_s0_pos + c_s_pos p",
 }
-UNITS = {"A_eff": "m^2", "F_0": "N", "F_d": "N", "F_d0": "N", "c_d": "N/Pa", "K_v": "N s/m", "F_s_pos": "N",
-         "F_s_neg": "N", "v_s": "m/s", "F_s0_pos": "N", "F_s0_neg": "N", "c_s_pos": "N/Pa", "c_s_neg": "N/Pa"}
+#: Each fitted parameter's unit, spelled as :data:`boomfmi.units.UNITS` spells it.
+PARAMETER_UNITS = {"A_eff": "m2", "F_0": "N", "F_d": "N", "F_d0": "N", "c_d": "N/Pa", "K_v": "N.s/m", "F_s_pos": "N",
+                   "F_s_neg": "N", "v_s": "m/s", "F_s0_pos": "N", "F_s0_neg": "N", "c_s_pos": "N/Pa", "c_s_neg": "N/Pa"}
 #: Travel after a reversal within which the breakaway peak is sought [m]: a seal's
 #: pre-sliding travel is a fraction of a millimetre.
 BREAKAWAY_TRAVEL = 1e-3
@@ -615,7 +616,7 @@ def bench_friction(fit_paths, hold_paths, area: float, opts: dict, split: bool =
             "formula": FORMULAS[law],
             "parameters": fit.params,
             "intervals": intervals,
-            "units": {k: UNITS[k] for k in fit.params},
+            "units": {k: PARAMETER_UNITS[k] for k in fit.params},
             "n_parameters": len(fit.params) - (1 if A_fixed is not None else 0),
             "rmse_fit_N": rmse(fit, fit_d),
             "rmse_holdout_N": rmse(fit, hold_d),
@@ -648,3 +649,10 @@ def bench_friction(fit_paths, hold_paths, area: float, opts: dict, split: bool =
         "warnings": warnings,
         "_data": (fits, fit_d, hold_d),
     }
+
+
+__all__ = ["LAWS", "FORMULAS", "PARAMETER_UNITS", "BREAKAWAY_TRAVEL", "PRESSURE_SPAN", "N_BOOT", "MIN_SAMPLES",
+           "DT_RANGE", "MAX_SPEED", "TRAVEL_RANGE", "Run", "load_run", "check_plausible_run", "check_friction_signs",
+           "split_strokes", "Data", "combine", "LawFit", "fit_law", "stribeck_range", "levels", "friction", "predict",
+           "WEBB", "clusters", "bootstrap", "stroke_sse", "compare", "choose", "rmse", "pressure_span",
+           "check_distinct", "bench_friction"]

@@ -52,7 +52,8 @@ DISTINCT = 10.0
 CLOSING_SMOOTH = 0.5
 #: Fewest samples after the chamber was closed.
 MIN_SAMPLES = 30
-UNITS = {"p0": "Pa", "C": "kg/(s Pa)", "A": "m^2", "dT0": "K", "tau": "s"}
+#: Each fitted parameter's unit, spelled as :data:`boomfmi.units.UNITS` spells it.
+PARAMETER_UNITS = {"p0": "Pa", "C": "kg/(s.Pa)", "A": "m2", "dT0": "K", "tau": "s"}
 #: A leak-down run's plausible sample spacing and length [s] (a DAQ's rate; a second to
 #: a week): beyond them the map's unit of t is not the file's (``foreign.check_time_scale``).
 SPACING = (1e-6, 60.0)
@@ -226,7 +227,7 @@ def fit_run(law: str, run: LeakRun, V: float, gas: Gas, P_atm: float, sigma: flo
     names = _names(law)
     at_bound = [names[i] for i in range(len(best.x)) if i != 1 and
                 min(best.x[i] - lo[i], hi[i] - best.x[i]) <= 1e-3 * (hi[i] - lo[i])]
-    return {"parameters": theta, "intervals": ci, "units": {p: UNITS[p] for p in theta}, "at_bound": at_bound,
+    return {"parameters": theta, "intervals": ci, "units": {p: PARAMETER_UNITS[p] for p in theta}, "at_bound": at_bound,
             "rss_Pa2": rss, "rmse_Pa": math.sqrt(rss / n), "n_parameters": k, "_fit": run.p + res, "_resid": res}
 
 
@@ -327,7 +328,7 @@ def bench_leak(paths, V: float, opts: dict, P_atm: float = reference_rig.P_atm, 
                                     else "orifice")),
             "thermal": chosen.endswith("_thermal"),
             "size": {"name": size_name, "value": P[size_name], "ci95": laws[chosen]["intervals"][size_name],
-                     "unit": UNITS[size_name]},
+                     "unit": PARAMETER_UNITS[size_name]},
             "leak_flow_start_kg_s": float(mdot0),
         })
         if size_name == "A":
@@ -339,3 +340,8 @@ def bench_leak(paths, V: float, opts: dict, P_atm: float = reference_rig.P_atm, 
             "interval_method": "95 %, Jacobian sandwich with Newey-West weights up to the residuals' "
                                "decorrelation lag",
             "_curves": curves}
+
+
+__all__ = ["LAWS", "DISTINCT", "CLOSING_SMOOTH", "MIN_SAMPLES", "PARAMETER_UNITS", "SPACING", "DURATION", "LeakRun",
+           "parse_pressure", "load_leak_run", "closing", "noise", "simulate", "fit_run", "decorrelation_lag",
+           "effective_samples", "bic", "bench_leak"]

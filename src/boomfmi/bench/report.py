@@ -10,8 +10,9 @@ import numpy as np
 
 from ..physics import friction_laws as fl
 
-#: Display factors of the SI units in the tables: (factor, unit shown).
-DISPLAY = {"m^2": (1e6, "mm^2"), "N/Pa": (1e5, "N/bar"), "m/s": (1e3, "mm/s"), "kg/(s Pa)": (1.0, "kg/(s Pa)")}
+#: Display factors of the SI units in the tables (the units' names and display units as
+#: :data:`boomfmi.units.UNITS` spells them): (factor, unit shown).
+DISPLAY = {"m2": (1e6, "mm2"), "N/Pa": (1e5, "N/bar"), "m/s": (1e3, "mm/s")}
 
 
 def _pyplot():
@@ -182,3 +183,6 @@ def leak_plot(doc: dict, curves: list, path: Path) -> bytes:
     data = _save(fig, path)
     plt.close(fig)
     return data
+
+
+__all__ = ["DISPLAY", "friction_plots", "friction_html", "leak_plot"]

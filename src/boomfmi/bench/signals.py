@@ -87,3 +87,6 @@ def stroke_ids(v: np.ndarray, rest: np.ndarray) -> np.ndarray:
     filled = filled[last]
     change = np.concatenate([[0], (np.diff(filled) != 0).astype(int)])
     return np.cumsum(change)
+
+
+__all__ = ["SMOOTH", "REST_SIGMAS", "robust_noise", "running_median", "local_slope", "velocity", "stroke_ids"]

@@ -224,3 +224,6 @@ def identified(name: str, estimate, details: dict) -> bool:
     if name == "F_s":
         return bool((details.get("static_friction") or {}).get("identified"))
     return estimate.tells
+
+
+__all__ = ["CASE_VERSION", "case_spec", "CASE_STARTED", "run_case", "identified"]

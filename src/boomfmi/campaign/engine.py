@@ -414,3 +414,7 @@ def run_campaign(manifest, out, scheduler: str | None = None, workers: int | Non
     run["workers_lost"] = {a["worker"]: a["reason"] for a in lost}       # this run's, each with why
     run["cases_retried"] = sum(any(a["lost"] for a in r.get("attempts") or []) for r in records if not r.get("resumed"))
     return write_campaign(out, manifest, records, run)
+
+
+__all__ = ["WORKER_WAIT", "LOCAL_WORKER_CONFIG", "Progress", "removal_reason", "Attempts", "case_folder", "load_done",
+           "write_case", "Engine", "run_cases", "run_campaign"]

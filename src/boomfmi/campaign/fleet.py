@@ -165,3 +165,5 @@ def score_fleet(campaign: dict, truth: dict) -> dict:
             "unchanged": sum(r["onset"] is None for r in rows.values()),
             "unchanged_flagged": sum(r["onset"] is None and not r["ok"] for r in rows.values()),
             "all_ok": all(r["ok"] for r in rows.values())}
+
+__all__ = ["KINDS", "EXPECTED", "DURATION", "START", "plan_fleet", "make_fleet", "score_fleet"]

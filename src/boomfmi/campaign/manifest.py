@@ -314,3 +314,7 @@ def write_manifest(path, rows) -> Path:
                    + ([rel(r.get("sidecar"))] if has_sidecar else []))
     path.write_text(buf.getvalue())
     return path
+
+
+__all__ = ["REQUIRED", "OPTIONAL", "ROLES", "MAX_LISTED", "ManifestError", "Entry", "Case", "Manifest", "slug",
+           "parse_date", "date_key", "read_manifest", "write_manifest"]

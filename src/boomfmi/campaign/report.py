@@ -192,3 +192,6 @@ run on {e(run['scheduler'])} ({e(str(run['address']))}, {run['worker_threads']} 
 <table><tr><th>machine</th><th>date</th><th>verdict</th><th>baseline</th><th>time</th><th>worker (attempts)</th><th></th></tr>
 {''.join(case_rows)}</table>
 </body></html>"""
+
+
+__all__ = ["write_campaign"]

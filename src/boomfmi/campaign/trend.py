@@ -173,3 +173,6 @@ def _status(flag: dict) -> str:
 
 def _params(p: dict) -> str:
     return ", ".join(f"{k} = {v:.3g}" for k, v in p.items())
+
+
+__all__ = ["parameter_move", "effect_size", "effect_move", "persistent", "machine_trends"]

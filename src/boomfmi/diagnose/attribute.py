@@ -23,19 +23,33 @@ and p_b.
 * **The baseline with the effect.**  The baseline load is identified once, on the
   fit recordings (``identify.fit``: from the recorded pressures, so an effect on the
   pneumatics or on every sensor alike does not bias it).  An effect that changes the
-  load's own law (``friction``: the Stribeck curve) is fitted jointly with the load:
-  for each value of its parameter the load is identified anew with the effect in
-  Eq. 8 and 9 (:func:`_fit_friction`), so a baseline that absorbed part of the effect
-  does not hide it.
-* **Pairs.**  Where no single effect explains the gap, or the best leaves a gap, pairs
-  among the ``PAIR_POOL`` best singles (and the ``FIT_POOL`` that fitted the fit
-  recordings best) are fitted jointly (:func:`_pairs`), from the singles' fits or from the
-  stronger's fit with the other fitted beside it, whichever fits better; each effect
-  of a pair must pay for itself (remove ``MIN_SHRINK_SECOND`` of what the other alone
-  leaves beyond the holdout's noise floor), so that noise is not explained by a second
-  effect.
+  load's own law (the ``friction`` stage) is fitted jointly with the load: for each
+  value of its parameters the load is identified anew with the effect in Eq. 8 and 9
+  (:func:`_fit_friction`), so a baseline that absorbed part of the effect does not
+  hide it: by the entry's own faster fit where it names one (``Effect.fit``: the
+  Stribeck velocity's search, :func:`fit_stribeck`; the seal-pressure coefficient as
+  one more linear column, :func:`fit_seal_laws`), else generically
+  (:func:`fit_with_load`: the load by nonlinear least squares of the equation error
+  with the effect's form in it, the effect's parameters by output error).  No fit
+  reads an effect's name: a stage, a fit, a load law or an integrator of its entry.
+* **Pairs.**  Where no single effect explains the gap (``MIN_SHRINK``), or the best
+  leaves one beyond the noise, pairs are fitted jointly (:func:`_pairs`) among every
+  candidate that lowers the fit recordings' error at all, whatever it does alone to the
+  holdout (:func:`pair_combos`: two effects may each explain little alone, or one make
+  the holdout worse with the other's misfit around it): both effects and the baseline
+  together (a friction effect's load re-identified with it), from the singles' fits.
+  The cost is capped by a budget: at most ``PAIR_JOBS`` joint fits (as many as the
+  former pool of five candidates allowed), the pairs whose singles lowered the fit
+  error most first, each fit at most ``PAIR_EVALUATIONS`` evaluations.
 
-Decisions carry margins against the recordings' own noise:
+The verdict is the most probable explanation (:mod:`.evidence`): every candidate set
+(``none``: the baseline; each effect; each pair fitted) and ``unexplained`` (something
+not in the catalogue) weighed by its evidence on the fit and holdout recordings under
+their own noise (each channel's noise floor, the residuals' correlation in time as an
+effective sample count, a BIC penalty per parameter, a prior per effect); the
+probabilities are reported (``Attribution.probabilities``, each candidate's ``score``
+is its set's).  Margins against the recordings' own noise stay where they decide what
+is fitted at all:
 
 * no gap: the baseline's holdout error is within ``NOISE_FACTOR`` times the noise
   floor (each channel's noise over its range) plus ``ABS_FLOOR``: verdict ``[]``, and
@@ -43,16 +57,15 @@ Decisions carry margins against the recordings' own noise:
   the load's own fit tells pressure_friction (:func:`_friction_told`: the seals'
   friction that the baseline's F_d holds at the mean pressure, which may leave the
   outputs within their noise);
-* a pair that passes (see above): the pair; else the best single effect if it
-  shrinks the error by at least ``MIN_SHRINK``;
-* otherwise ``["unexplained"]``, but only where the gap is also beyond what the
-  baseline's own uncertainty moves its prediction (each identified parameter at the
-  nearer end of its 95 % interval, combined in quadrature: :func:`baseline_spread`);
-  a gap within that, which no effect explains, is ``[]`` (or pressure_friction where
-  the load's fit tells it, as above): the identification itself leaves it open.  (A
-  threshold that added the spread before any fit hid effects the baseline's
-  re-identification had made uncertain: those effects widen the intervals they are
-  then hidden behind.)
+* ``none`` most probable: verdict ``[]``, or pressure_friction where the load's own
+  fit tells it (as above; that verdict is the load fit's: its candidate, the load
+  re-identified with it, is then weighed in place of its output fit, so that its
+  probability is reported; it need not be the most probable there);
+* ``unexplained`` most probable: ``["unexplained"]``.  Its model removes what the best
+  explanation leaves beyond the noise and beyond what the baseline's own uncertainty
+  moves its prediction (each identified parameter at the nearer end of its 95 %
+  interval, combined in quadrature: :func:`baseline_spread`), so a gap within that is
+  no finding: the identification itself leaves it open.
 """
 from __future__ import annotations
 
@@ -68,9 +81,12 @@ import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
 from ..compare import CHANNELS, nrmse, rig_model, shrink, simulate_recording
-from ..identify.fit import PRESSURE_COEFFICIENT, identify
+from ..identify.fit import PRESSURE_COEFFICIENT, identify, load_with_effect, motion, static_friction
 from ..identify.preprocess import ABS_FLOOR, NOISE_FACTOR, noise_floor, prepare
-from ..model import EFFECTS, measure
+from ..model import EFFECTS, Boom, measure
+from ..model.boom import measurement_lag
+from ..model.catalogue import STAGES, fit_hook
+from .evidence import NONE, UNEXPLAINED, Hypothesis, probabilities, residual_counts
 
 #: name -> [(parameter, lower, upper, log scale)] of its first law, from the catalogue
 CANDIDATES = {name: [(p.name, p.lower, p.upper, p.log) for p in e.forms[0]] for name, e in EFFECTS.items()}
@@ -79,9 +95,8 @@ CANDIDATES = {name: [(p.name, p.lower, p.upper, p.log) for p in e.forms[0]] for 
 FORMS = {name: [[(p.name, p.lower, p.upper, p.log) for p in form] for form in e.forms]
          for name, e in EFFECTS.items() if len(e.forms) > 1}
 MIN_SHRINK = 0.35
-MIN_SHRINK_SECOND = 0.4     #: the share of the gap left by the best that a second effect must remove
-PAIR_POOL = 3               #: the candidates among which pairs are tried
-FIT_POOL = 2                #: and those that fitted the fit recordings best, beside them
+MIN_SHRINK_SECOND = 0.4     #: the share of the gap left by the best that a second effect must remove (the excavator's cuts)
+PAIR_POOL = 3               #: the candidates among which the excavator's cuts try pairs
 SCREEN_POINTS = 4           #: points per parameter that screen an effect's range
 SCREEN = 0.02               #: the share of the fit error a screened point must remove to go on
 PAIR_EVALUATIONS = 24       #: the joint fit of a pair: its simplex's evaluations at most
@@ -96,14 +111,16 @@ FIT_RTOL = 1e-4        #: and while fitting (each fit runs the model a dozen tim
 def errors(values: dict, effects: dict, rec, rtol: float = RTOL) -> dict:
     """NRMSE per channel of the model (``values`` and ``effects``) on one recording.
 
-    The sensor lag acts on the measured channels only, after the physics: with it
-    alone, the model runs once (cached) and only the measurement path varies."""
-    only_lag = set(effects) == {"sensor_lag"}
-    sim = _baseline(values, rec, rtol) if only_lag else simulate_recording(values, rec, effects=effects, rtol=rtol)
-    if only_lag:
+    The measurement stage's effects (the sensor lag) act on the measured channels only,
+    after the physics: with them alone, the model runs once (cached) and only the
+    measurement path varies."""
+    only_measured = bool(effects) and all(EFFECTS[n].stage == "measurement" for n in effects)
+    sim = (_baseline(values, rec, rtol) if only_measured
+           else simulate_recording(values, rec, effects=effects, rtol=rtol))
+    if only_measured:
         t = sim["time"].to_numpy()
-        q = effects["sensor_lag"]
-        sim = {c: measure(sim[c].to_numpy(), t, q.get("tau", 0.0), q.get("delay", 0.0)) for c in CHANNELS}
+        tau, delay = measurement_lag(effects)
+        sim = {c: measure(sim[c].to_numpy(), t, tau, delay) for c in CHANNELS}
     return nrmse(sim, rec)
 
 
@@ -164,7 +181,7 @@ def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = N
     screen anew.  ``cost_of(effects) -> float``: the error to minimise in place of
     :func:`fit_cost` on ``values`` and ``fit_recs`` (a cut of the model: the
     excavator's per-joint diagnosis)."""
-    spec = [(n, *s) for n in names for s in (forms or {}).get(n, CANDIDATES[n])]
+    spec = [(n, *s) for n in names for s in (forms or {}).get(n) or _laws(EFFECTS[n])[0]]
 
     def to_effects(z):
         out: dict = {n: dict(p) for n, p in (fixed or {}).items()}
@@ -215,13 +232,25 @@ class Attribution:
     spread: dict = field(default_factory=dict)   #: the baseline's own uncertainty, per channel
     beyond_noise: float = 0.0  #: the summed NRMSE beyond which candidates are fitted (noise alone)
     told: bool = False         #: the verdict was told by the load's own fit (:func:`_friction_told`), not the gap
+    probabilities: dict = field(default_factory=dict)   #: {set: probability} (:mod:`.evidence`), the verdict's first
+    effective_samples: dict = field(default_factory=dict)   #: the holdout's independent samples per channel
+    fit_samples: float = 0.0   #: and the fit recordings', all channels
+    fit_error: float = math.nan   #: the baseline's fit cost (:func:`fit_cost`; nan: not fitted, no gap)
 
 
 def _fit_and_score(args):
     name, values, fit_recs, hold_recs, fixed, base_cost = args
-    if EFFECTS[name].stage == "friction" and not fixed:
-        return _fit_friction(name, fit_recs, hold_recs)
-    forms = FORMS.get(name, [CANDIDATES[name]])
+    effect = EFFECTS[name]
+    if effect.stage not in STAGES:
+        raise ValueError(f"effect {name!r} acts in the stage {effect.stage!r}, which the model does not have "
+                         f"({', '.join(STAGES)}): it cannot be fitted")
+    if not fixed:      # alone: the entry's own faster fit, or a friction effect's with its load
+        hook = fit_hook(effect)
+        if hook is not None:
+            return hook(effect, fit_recs, hold_recs)
+        if effect.stage == "friction":
+            return _fit_friction(name, fit_recs, hold_recs)
+    forms = _laws(effect)
     laws = lambda form: {q[0] for q in form}
     # every law that holds no other's parameters screened, the one that screens best
     # refined; then a law that holds its parameters and more (a leak both laminar and
@@ -245,23 +274,81 @@ def _fit_and_score(args):
     return name, fx, cost, mean_errors(values, fx, hold_recs), None
 
 
-def _fit_friction(name, fit_recs, hold_recs):
-    """A friction effect fitted jointly with the baseline it changes, by the load's own
-    identification with the effect in Eq. 8 and 9 (``identify.fit.identify``).  A
-    baseline identified without the effect would have absorbed part of it (F_s, F_d,
-    M) and hidden the rest.
+def _laws(effect) -> list:
+    """The effect's laws as :func:`fit_effects` takes them: [[(parameter, lower, upper, log)]]."""
+    return [[(p.name, p.lower, p.upper, p.log) for p in form] for form in effect.forms]
 
-    * stribeck_friction: for each Stribeck velocity (a log grid, then refined) the load
-      is identified anew, and the value whose identification fits the recorded
-      velocities best is kept, with its load;
-    * pressure_friction: its coefficient is one more linear term of Eq. 8, identified
-      with the load for each seal-pressure law; the law whose model fits the fit
-      recordings best is kept."""
+
+def _fit_friction(name, fit_recs, hold_recs):
+    """A friction effect fitted jointly with the baseline it changes: a baseline
+    identified without the effect would have absorbed part of it (F_s, F_d, M, K_v) and
+    hidden the rest.  By the entry's own faster fit where it has one (``Effect.fit``:
+    :func:`fit_stribeck`, :func:`fit_seal_laws`), else by the generic one
+    (:func:`fit_with_load`).  Returns ``(name, fx, cost, holdout errors, load)``."""
+    effect = EFFECTS[name]
+    if effect.stage != "friction":
+        raise ValueError(f"effect {name!r} acts in the {effect.stage!r} stage, not the friction stage: "
+                         f"its fit does not re-identify the load")
+    return (fit_hook(effect) or fit_with_load)(effect, fit_recs, hold_recs)
+
+
+def _prepared(fit_recs):
     rig = rig_model(fit_recs[0])
-    preps = [prepare(r, geometry=rig.geometry, P_atm=rig.P_atm) for r in fit_recs]
-    if name == "pressure_friction":
-        return _fit_pressure_friction(name, rig, preps, fit_recs, hold_recs)
-    (param, lo, hi, log), = CANDIDATES[name]
+    return rig, [prepare(r, geometry=rig.geometry, P_atm=rig.P_atm) for r in fit_recs]
+
+
+def fit_with_load(effect, fit_recs, hold_recs):
+    """The generic fit of a friction-stage effect (an entry without a faster one): for
+    each value of its parameters the baseline load is re-identified with the effect's
+    form in the load (``identify.fit.load_with_effect``: the equation error by
+    nonlinear least squares, from the effect-free fit), and the parameters are fitted
+    by output error of the model with that load (:func:`fit_effects`: screened, then
+    refined), each law of the entry, the one that fits the fit recordings best kept."""
+    name = effect.name
+    rig, preps = _prepared(fit_recs)
+    plain = identify(preps, rig.cylinder, rig.P_atm, valve=rig.valve, gas=rig.gas).values()
+    plain = {k: v for k, v in plain.items() if math.isfinite(v)}
+    motions = [motion(p, rig.cylinder, rig.P_atm) for p in preps]
+    context = Boom(rig, check=False)       # the stage's context (catalogue.StageContext)
+    loads: dict = {}
+
+    def load_for(fx):        # the baseline re-identified with the effect at fx
+        q = dict(fx[name])
+        key = tuple(sorted(q.items()))
+        if key not in loads:
+            joint = load_with_effect(
+                motions, plain, lambda ld, v, p_a, p_b: effect.apply(ld, v, p_a, p_b, q, context))
+            if all(math.isfinite(joint[k]) and joint[k] > 0.0 for k in ("M", "K_v", "F_d")):
+                # F_s from the starts anew, on the load found with the effect: the plain
+                # fit's excess over F_d holds what the effect took from the sliding friction
+                F_s, _, _ = static_friction(motions, joint, rig.cylinder, rig.P_atm)
+                if F_s is not None:
+                    joint["F_s"] = max(F_s.value, joint["F_d"])
+            loads[key] = joint
+        return loads[key]
+    def cost_of(fx):         # the fit error with the effect at fx and its load (inf: no physical load)
+        joint = load_for(fx)
+        if not (all(math.isfinite(joint[k]) and joint[k] > 0.0 for k in ("M", "K_v", "F_d"))
+                and math.isfinite(joint["F_L"])):
+            return math.inf
+        return fit_cost(joint, fx, fit_recs)
+    base_cost = fit_cost(plain, {}, fit_recs)
+    fx, cost = min((fit_effects([name], plain, fit_recs, forms={name: form}, baseline_cost=base_cost,
+                                cost_of=cost_of) for form in _laws(effect)), key=lambda f: f[1])
+    joint = load_for(fx)
+    if not math.isfinite(cost):         # no value of the effect leaves a physical load: the plain one
+        joint = plain
+    return name, fx, cost, mean_errors(joint, fx, hold_recs), joint
+
+
+def fit_stribeck(effect, fit_recs, hold_recs):
+    """stribeck_friction's faster fit (its ``Effect.fit``; ``load_law`` "stribeck"): for
+    each Stribeck velocity (a log grid, then refined) the load is identified anew
+    (``identify.fit.identify``'s ``v_s``), and the value whose identification fits the
+    recorded velocities best is kept, with its load."""
+    name = effect.name
+    rig, preps = _prepared(fit_recs)
+    (param, lo, hi, log), = _laws(effect)[0]
     def fitted(v_s):         # (how far the velocity fit misses, the load) at v_s
         res = identify(preps, rig.cylinder, rig.P_atm, valve=rig.valve, gas=rig.gas, v_s=v_s)
         return res.details.get("velocity_error", {}).get("rms_velocity_m_s", math.inf), res.values()
@@ -286,29 +373,39 @@ def _fit_friction(name, fit_recs, hold_recs):
     return name, fx, cost, mean_errors(joint, fx, hold_recs), joint
 
 
-def _seal_laws(rig, preps):
-    """The load identified with pressure_friction by each seal-pressure law of the
-    catalogue: per law ``(result, fx, joint)``: identify's :class:`FitResult`, the
-    effect's parameters (the coefficient within its bounds) and the load without it."""
+def _seal_laws(effect, rig, preps):
+    """The load identified with ``effect`` (``load_law`` "seal_pressure") by each of its
+    laws: per law ``(result, fx, joint)``: identify's :class:`FitResult`, the effect's
+    parameters (the coefficient within its bounds) and the load without it."""
+    if effect.load_law != "seal_pressure":
+        raise ValueError(f"effect {effect.name!r} has no seal-pressure load law (its load_law: {effect.load_law!r})")
     out = []
-    for (q,) in EFFECTS["pressure_friction"].forms:
-        law = next(k for k, v in PRESSURE_COEFFICIENT.items() if v == q.name)
+    for (q,) in effect.forms:
+        law = next((k for k, v in PRESSURE_COEFFICIENT.items() if v == q.name), None)
+        if law is None:
+            raise ValueError(f"effects.{effect.name}.{q.name}: not a seal-pressure law's coefficient "
+                             f"({', '.join(PRESSURE_COEFFICIENT.values())})")
         res = identify(preps, rig.cylinder, rig.P_atm, valve=rig.valve, gas=rig.gas, pressure=law)
         found = res.values()
         joint = {k: v for k, v in found.items() if k not in PRESSURE_COEFFICIENT.values() and math.isfinite(v)}
-        out.append((res, {"pressure_friction": {q.name: float(min(max(found[q.name], q.lower), q.upper))}}, joint))
+        out.append((res, {effect.name: {q.name: float(min(max(found[q.name], q.lower), q.upper))}}, joint))
     return out
 
 
-def _fit_pressure_friction(name, rig, preps, fit_recs, hold_recs):
+def fit_seal_laws(effect, fit_recs, hold_recs):
+    """pressure_friction's faster fit (its ``Effect.fit``; ``load_law`` "seal_pressure"):
+    its coefficient is one more linear term of Eq. 8, identified with the load for each
+    seal-pressure law; the law whose model fits the fit recordings best is kept."""
+    rig, preps = _prepared(fit_recs)
     fits = [(fit_cost(joint, fx, fit_recs), fx, joint)
-            for _, fx, joint in _seal_laws(rig, preps)]
+            for _, fx, joint in _seal_laws(effect, rig, preps)]
     cost, fx, joint = min(fits, key=lambda f: f[0])
-    return name, fx, cost, mean_errors(joint, fx, hold_recs), joint
+    return effect.name, fx, cost, mean_errors(joint, fx, hold_recs), joint
 
 
 def _friction_told(fit_recs, hold_recs, before: dict):
-    """pressure_friction where the outputs cannot show it: the baseline's F_d takes the
+    """A seal-pressure effect (``load_law`` "seal_pressure": pressure_friction) where the
+    outputs cannot show it: the baseline's F_d takes the
     seals' friction at the recordings' mean pressure, and what is left may sit within
     the output noise.  The load's own fit still tells it: the friction moves with the
     pressure sample by sample.  Named (a :class:`Candidate`, score 1) only where
@@ -323,35 +420,38 @@ def _friction_told(fit_recs, hold_recs, before: dict):
       > 0), which was never fitted on.
 
     None otherwise (the verdict stays as it was)."""
-    rig = rig_model(fit_recs[0])
-    preps = [prepare(r, geometry=rig.geometry, P_atm=rig.P_atm) for r in fit_recs]
+    sealing = [e for e in EFFECTS.values() if e.load_law == "seal_pressure"]
+    if not sealing:
+        return None
+    rig, preps = _prepared(fit_recs)
     plain = identify(preps, rig.cylinder, rig.P_atm, valve=rig.valve, gas=rig.gas)
     rms0 = plain.details.get("velocity_error", {}).get("rms_velocity_m_s", math.nan)
     if not math.isfinite(rms0):
         return None
     told = []
-    for res, fx, joint in _seal_laws(rig, preps):
-        rms = res.details.get("velocity_error", {}).get("rms_velocity_m_s", math.inf)
-        (q,) = fx["pressure_friction"]
-        c = res.params[q]
-        if rms <= (1.0 - FRICTION_GAIN) * rms0 and c.ci95[0] >= FRICTION_CLEAR * c.value > 0.0:
-            told.append((rms, fx, joint))
+    for effect in sealing:
+        for res, fx, joint in _seal_laws(effect, rig, preps):
+            rms = res.details.get("velocity_error", {}).get("rms_velocity_m_s", math.inf)
+            (q,) = fx[effect.name]
+            c = res.params[q]
+            if rms <= (1.0 - FRICTION_GAIN) * rms0 and c.ci95[0] >= FRICTION_CLEAR * c.value > 0.0:
+                told.append((rms, effect.name, fx, joint))
     if not told:
         return None
-    _, fx, joint = min(told, key=lambda t: t[0])
+    _, name, fx, joint = min(told, key=lambda t: t[0])
     after = mean_errors(joint, fx, hold_recs)
     gain = shrink(before, after)
     if not gain > 0.0:
         return None
     cost = fit_cost(joint, fx, fit_recs)
-    return Candidate("pressure_friction", fx["pressure_friction"], cost, after, gain, score=1.0, values=joint)
+    return Candidate(name, fx[name], cost, after, gain, score=1.0, values=joint)
 
 
 def _cost(job) -> int:
     """A fit's rough cost, for scheduling: steep in its parameters (a grid, then a
     simplex), times its laws."""
     names = job[0] if isinstance(job[0], list) else [job[0]]
-    return sum(max(len(f) for f in FORMS.get(n, [CANDIDATES[n]])) ** 3 * len(FORMS.get(n, [None])) for n in names)
+    return sum(max(len(f) for f in EFFECTS[n].forms) ** 3 * len(EFFECTS[n].forms) for n in names)
 
 
 def may_start_processes() -> bool:
@@ -429,105 +529,114 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     beyond_noise = NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR
     threshold = beyond_noise + sum(spread.values())
     gap = sum(before.values()) > beyond_noise
-    # within the baseline's own uncertainty a gap is no finding by itself: an effect that
-    # explains it is still named, but what no effect explains there is not "unexplained"
-    uncertain = sum(before.values()) <= threshold
     if not gap:        # nothing beyond the noise: no output fit can show more
         told = _friction_told(fit_recs, hold_recs, before)
         att = Attribution(before, noise, gap, [told] if told else [], [told.name] if told else [])
         att.threshold, att.spread, att.beyond_noise, att.told = threshold, spread, beyond_noise, told is not None
+        att.probabilities, att.effective_samples, att.fit_samples = _weigh(att.candidates, before, None, noise,
+                                                                           spread, base, fit_recs, hold_recs)
+        for c in att.candidates:
+            c.score = round(att.probabilities.get(set_name(c), 0.0), 4)
         return att
     base_cost = fit_cost(values, {}, fit_recs)
     fitted = _map(_fit_and_score, [(n, values, fit_recs, hold_recs, None, base_cost) for n in names], workers)
     cands = [Candidate(n, fx[n], cost, after, shrink(before, after), values=joint)
              for n, fx, cost, after, joint in fitted]
     cands.sort(key=lambda c: -c.shrink)
-    weights = [max(c.shrink, 0.0) ** 2 for c in cands]
-    total_w = sum(weights) or 1.0
-    best_strength = min(1.0, max(cands[0].shrink, 0.0) / MIN_SHRINK) if cands else 0.0
-    for c, w in zip(cands, weights):
-        c.score = round(best_strength * w / total_w, 4)
-    verdict: list = []
+    pairs: list = []
+    # pairs where no single effect explains the gap, or where the best leaves more than
+    # the noise (the baseline's spread no longer counts: the best's fit has moved the
+    # model off the baseline already); a pair cannot show more than the noise otherwise
+    if cands and (cands[0].shrink < MIN_SHRINK
+                  or sum(cands[0].holdout.values()) > NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR):
+        pairs = _pairs(cands, values, fit_recs, hold_recs, before, workers, base_cost)
+    probs, counts, n_fit = _weigh(cands + pairs, before, base_cost, noise, spread, base, fit_recs, hold_recs)
+    cands = sorted(cands + pairs, key=lambda c: (-probs.get(set_name(c), 0.0), -c.shrink))
+    for c in cands:
+        c.score = round(probs.get(set_name(c), 0.0), 4)
+    top = next(iter(probs))
     told = None
-    if gap and cands:
-        best = cands[0]
-        pair = None
-        # pairs where no single effect explains the gap, or where the best leaves more
-        # than the noise (the baseline's spread no longer counts: the best's fit has
-        # moved the model off the baseline already)
-        if best.shrink < MIN_SHRINK or sum(best.holdout.values()) > NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR:
-            pair = _pairs(cands, values, fit_recs, hold_recs, before, workers, sum(noise.values()), base_cost)
-        if pair is not None:
-            pair.score = round(min(1.0, pair.shrink / MIN_SHRINK), 4)
-            verdict = pair.name.split("+")
-            cands.insert(0, pair)
-        elif best.shrink >= MIN_SHRINK:
-            verdict = [best.name]
-        elif not uncertain:
-            verdict = ["unexplained"]
-        else:
-            told = _friction_told(fit_recs, hold_recs, before)
-            if told is not None:
-                verdict = [told.name]
-                cands = [told] + [c for c in cands if c.name != told.name]
+    if top == UNEXPLAINED:
+        verdict = ["unexplained"]
+    elif top != NONE:
+        verdict = top.split(" + ")
+        cands.sort(key=lambda c: set_name(c) != top)      # the verdict's candidate first (the report's)
+    else:            # the baseline stands, unless the load's own fit tells pressure_friction
+        verdict = []
+        told = _friction_told(fit_recs, hold_recs, before)
+        if told is not None:       # weighed in place of its output fit (the verdict is the load fit's)
+            verdict = [told.name]
+            cands = [told] + [c for c in cands if c.name != told.name]
+            probs, counts, n_fit = _weigh(cands, before, base_cost, noise, spread, base, fit_recs, hold_recs)
+            for c in cands:
+                c.score = round(probs.get(set_name(c), 0.0), 4)
     att = Attribution(before, noise, gap, cands, verdict)
     att.threshold, att.spread, att.beyond_noise = threshold, spread, beyond_noise
-    att.told = told is not None
+    att.told, att.probabilities, att.effective_samples = told is not None, probs, counts
+    att.fit_samples, att.fit_error = n_fit, base_cost
     return att
 
 
-def _pairs(cands, values, fit_recs, hold_recs, before, workers, noise: float, base_cost: float):
-    """The best pair of effects, where no single one explains the gap or the best leaves
-    one beyond the noise.  Pairs are drawn among the PAIR_POOL candidates that helped
-    most on the holdout on their own (not only beside the best: two effects may each
-    explain too little alone), and the FIT_POOL that fitted the fit recordings best (an
-    effect strong in the fit recordings and weak in the holdout), fitted jointly
-    (:func:`_fit_pair`).  A pair is kept only if it
-    removes MIN_SHRINK of the gap and each of its effects pays for itself: removes at
-    least MIN_SHRINK_SECOND of what the other one alone leaves beyond the noise (the
-    penalty that keeps noise from being explained by a second effect; ``noise``: the
-    holdout's noise floor summed over the channels, about the error a perfect model
-    still shows, which no effect can remove)."""
-    helped = [c for c in cands if c.shrink > 0.0]
-    pool = helped[:PAIR_POOL]
-    # and the FIT_POOL that explained most of the fit recordings, if not already in: an
-    # effect strong in the fit recordings but weak in the holdout is fitted there
-    # (another, absorbing it, may have done better on the holdout alone), and so is the
-    # runner-up there (a weak effect beside a strong one shows in the fit recordings'
-    # error first).  Among those that lower that error by SCREEN (``base_cost``: the
-    # baseline's), whatever they do to the holdout alone, where the strong one's
-    # misfit may bury them: the pair must still pay on the holdout.
-    showed = [c for c in cands if c.fit_error <= (1.0 - SCREEN) * base_cost]
-    pool += [c for c in sorted(showed, key=lambda c: c.fit_error)[:FIT_POOL] if c not in pool]
-    by_name = {c.name: c for c in cands}
-    # where the best explains the gap on its own, a pair must hold it (another pair
-    # would have to beat it with two effects the best does not need), and its partner
-    # must show on its own at least half of what it would have to remove beside the
-    # best (MIN_SHRINK_SECOND of what the best leaves beyond the noise): a second effect
-    # wholly hidden behind one that already explains the gap is not claimed
-    if pool and pool[0].shrink >= MIN_SHRINK:
-        total = sum(before.values())
-        needed = MIN_SHRINK_SECOND * (sum(pool[0].holdout.values()) - noise)
-        combos = [(pool[0], c) for c in pool[1:] if total - sum(c.holdout.values()) >= 0.5 * needed]
-    else:
-        combos = list(itertools.combinations(pool, 2))
+def set_name(c: Candidate) -> str:
+    """A candidate's set as the probabilities name it: its effects joined by " + "."""
+    return " + ".join(c.name.split("+"))
+
+
+def _parameters(c: Candidate) -> int:
+    """The parameters a candidate fitted (a pair's params are {effect: {param: value}})."""
+    return sum(len(v) if isinstance(v, dict) else 1 for v in c.params.values())
+
+
+def _weigh(cands, before, base_cost, noise, spread, base, fit_recs, hold_recs) -> tuple[dict, dict, float]:
+    """The probability of each candidate set, ``none`` and ``unexplained``
+    (:mod:`.evidence`), on the holdout's effective sample count per channel from the
+    baseline's residual there (``base``: its runs) and the fit recordings' at the same
+    rate per second; and those counts."""
+    counts, seconds = residual_counts(base, hold_recs)
+    fit_seconds = sum(float(r.data["t"].iloc[-1] - r.data["t"].iloc[0]) for r in fit_recs)
+    n_fit = sum(counts.values()) * fit_seconds / max(seconds, 1e-9)
+    hyps = [Hypothesis(NONE, 0, before, base_cost, 0)]
+    hyps += [Hypothesis(set_name(c), _parameters(c), c.holdout, c.fit_error, len(c.name.split("+")))
+             for c in cands]
+    return probabilities(hyps, noise, counts, n_fit, spread), counts, n_fit
+
+
+#: the joint fits of pairs at most (as many as the former pool of five candidates
+#: allowed), the most promising first (:func:`pair_combos`)
+PAIR_JOBS = 10
+
+
+def pair_combos(cands, base_cost: float, jobs: int = PAIR_JOBS) -> list:
+    """The pairs to fit jointly: among every candidate that lowers the fit recordings'
+    error below the baseline's (``base_cost``) at all, whatever it does alone to the
+    holdout (two effects may each explain little alone, or one make the holdout worse
+    with the other's misfit around it), the ``jobs`` pairs whose singles together lower
+    the fit error most (the sum of their reductions) first: the budget that caps the
+    cost, each joint fit itself capped at ``PAIR_EVALUATIONS`` evaluations."""
+    lowered = [c for c in cands if c.fit_error < base_cost and "+" not in c.name]
+    combos = list(itertools.combinations(lowered, 2))
+    combos.sort(key=lambda ab: ab[0].fit_error + ab[1].fit_error)
+    return combos[:jobs]
+
+
+def _pairs(cands, values, fit_recs, hold_recs, before, workers, base_cost: float) -> list:
+    """The pairs of :func:`pair_combos`, each fitted jointly (:func:`_fit_pair`, from the
+    singles' fits), as candidates; a pair that does not lower the fit error below its
+    better single's by SCREEN is left out (its evidence could only be its better
+    single's, less the penalty of a further effect)."""
+    combos = pair_combos(cands, base_cost)
     # a pair with a friction effect keeps the load identified with it
     jobs = [([a.name, b.name], a.values or b.values or values, fit_recs, hold_recs,
              {a.name: a.params, b.name: b.params}, {a.name: a.fit_error, b.name: b.fit_error})
             for a, b in combos]
-    if not jobs:
-        return None
-    best = None
-    for job, fitted in zip(jobs, _map(_fit_pair, jobs, workers)):
+    out = []
+    for job, fitted in zip(jobs, _map(_fit_pair, jobs, workers) if jobs else []):
         if fitted is None:
             continue
         pair_names, fx, cost, after = fitted
         joint = job[1] if job[1] is not values else None
-        cand = Candidate("+".join(pair_names), fx, cost, after, shrink(before, after), values=joint)
-        pays = all(_pays(by_name[other].holdout, after, noise) for other in pair_names)
-        if cand.shrink >= MIN_SHRINK and pays and (best is None or cand.shrink > best.shrink):
-            best = cand
-    return best
+        out.append(Candidate("+".join(pair_names), fx, cost, after, shrink(before, after), values=joint))
+    return out
 
 
 def _pays(single: dict, pair: dict, noise: float) -> bool:
@@ -582,3 +691,11 @@ def _fit_pair(args):
     if cost > at_start:
         fx, cost = start, at_start
     return names, fx, cost, mean_errors(values, fx, hold_recs)
+
+__all__ = [
+    "CANDIDATES", "FORMS", "MIN_SHRINK", "MIN_SHRINK_SECOND", "PAIR_POOL", "SCREEN_POINTS", "SCREEN",
+    "PAIR_EVALUATIONS", "GROW_EVALUATIONS", "GROW", "FRICTION_GAIN", "FRICTION_CLEAR", "RTOL",
+    "FIT_RTOL", "errors", "mean_errors", "fit_cost", "Candidate", "fit_effects", "Attribution",
+    "fit_with_load", "fit_stribeck", "fit_seal_laws", "may_start_processes", "baseline_spread",
+    "attribute", "set_name", "PAIR_JOBS", "pair_combos",
+]

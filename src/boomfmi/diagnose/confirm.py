@@ -26,6 +26,7 @@ import numpy as np
 from .. import physics as ph
 from ..compare import initial_state, nrmse, shrink
 from ..model import EFFECTS, fmu_variable, measure
+from ..model.boom import measurement_lag
 from ..paths import built
 from ..simulate import run_experiment
 
@@ -59,8 +60,8 @@ def run_fmus(ssp, values: dict, effects: dict, rec) -> dict:
     out = run_experiment(ssp, str(rec.path), parameters=[fmu_parameters(values, effects, rec)])
     t = rec.data["t"].to_numpy(float)
     sim = {c: np.interp(t, out["t"].to_numpy(), out[c].to_numpy()) for c in ("x", "p_a", "p_b")}
-    lag = effects.get("sensor_lag", {})
-    return {c: measure(y, t, lag.get("tau", 0.0), lag.get("delay", 0.0)) for c, y in sim.items()}
+    tau, delay = measurement_lag(effects)
+    return {c: measure(y, t, tau, delay) for c, y in sim.items()}
 
 
 def confirm(values: dict, effects: dict, rec, ssp=None, effect_values: dict | None = None) -> dict:
@@ -92,15 +93,17 @@ def agreement(doc: dict, reference_shrink: float) -> dict:
 def machine_parameters(values: dict, effects_by_joint: dict, rec) -> dict:
     """``excavator.ssp``'s parameters for the excavator holdout ``rec``: the identified
     friction and payload (``K_v_<joint>``, ``F_s_<joint>``, ``F_d_<joint>``, ``payload``
-    as ``identify.excavator`` names them; those not given keep the SSP's), the start
+    as ``identify.joints`` names them; those not given keep the SSP's), the start
     where the recording starts (each piston from its first angles, each chamber's
     pressures absolute) and each joint's effects as its FMUs' options
     (``model.machine.joint_fmu_variable``: ``valve_arm.tau_spool``,
     ``cylinder_arm.C_leak``, ``linkage.v_s_arm``; sensor_lag is applied to the outputs)."""
-    from ..identify.excavator_outputs import START_WINDOW, machine_for, measured_pistons, ssp_name
-    from ..model.machine import check_joint_effects, joint_fmu_variable
+    from ..identify.outputs import START_WINDOW, measured_pistons
+    from ..identify.preprocess import machine_for
+    from ..model.machine import check_joint_effects, excavator_machine, joint_fmu_variable
     from ..physics.linkage import JOINTS
     ex = machine_for(rec)
+    ssp_name = excavator_machine(ex).ssp_name
     check_joint_effects(effects_by_joint, ex)
     params = {ssp_name(k): float(v) for k, v in values.items()
               if k == "payload" or any(k == f"{q}_{j}" for q in ("K_v", "F_s", "F_d") for j in JOINTS)}
@@ -127,19 +130,19 @@ def run_machine_fmus(ssp, values: dict, effects_by_joint: dict, rec) -> dict:
     joint ``x_<j>``, ``p_a_<j>``, ``p_b_<j>`` (gauge) on its samples, each joint with
     sensor_lag seen through it (its pressures and angle lagged, x from the lagged angle,
     as the excavator's bridge measures)."""
-    from ..identify.excavator_outputs import machine_for
+    from ..identify.preprocess import machine_for
     from ..physics.linkage import JOINTS, pistons_from_angles
     out = run_experiment(ssp, str(rec.path), parameters=[machine_parameters(values, effects_by_joint, rec)])
     t = rec.data["t"].to_numpy(float)
     ts = out["t"].to_numpy(float)
     sim = {f"{q}_{j}": np.interp(t, ts, out[f"{q}_{j}"].to_numpy(float))
            for j in JOINTS for q in ("x", "p_a", "p_b", "angle")}
-    lagged = {j: effects_by_joint.get(j, {}).get("sensor_lag", {}) for j in JOINTS}
-    lagged = {j: q for j, q in lagged.items() if q.get("tau", 0.0) > 0.0 or q.get("delay", 0.0) > 0.0}
+    lagged = {j: measurement_lag(effects_by_joint.get(j, {})) for j in JOINTS}
+    lagged = {j: q for j, q in lagged.items() if q[0] > 0.0 or q[1] > 0.0}
     if lagged:
-        for j, q in lagged.items():
+        for j, (tau, delay) in lagged.items():
             for c in (f"p_a_{j}", f"p_b_{j}", f"angle_{j}"):
-                sim[c] = measure(sim[c], t, q.get("tau", 0.0), q.get("delay", 0.0))
+                sim[c] = measure(sim[c], t, tau, delay)
         pistons = pistons_from_angles(np.column_stack([sim[f"angle_{j}"] for j in JOINTS]), machine_for(rec))
         for i, j in enumerate(JOINTS):
             if j in lagged:
@@ -154,12 +157,13 @@ def confirm_machine(values: dict, effects_by_joint: dict, rec, ssp=None, effect_
     effects (``effects_by_joint``: ``{"arm": {"piston_leakage": {"C": 2e-11}}}``) set on
     its FMUs (``effect_values``: the friction and payload with the effects, where they
     were identified anew with them; default ``values``).  Returns per joint the NRMSE of
-    x, p_a, p_b before and after (``identify.excavator_outputs.excavator_nrmse``), each
+    x, p_a, p_b before and after (``identify.outputs.joint_nrmse``), each
     joint's ``shrink`` and the ``shrink`` over every channel of the joints with effects
     (:func:`compare.shrink`); ``skipped`` (why) where the SSP is not built.  A joint that
     is none, or an effect parameter that is not the catalogue's, raises
     :class:`physics.ParameterError` naming it (``effects.arm.piston_leakage.C``)."""
-    from ..identify.excavator_outputs import excavator_nrmse, machine_for
+    from ..identify.outputs import joint_nrmse as excavator_nrmse
+    from ..identify.preprocess import machine_for
     from ..model.machine import check_joint_effects
     ssp = Path(ssp) if ssp is not None else built("excavator.ssp")
     ex = machine_for(rec)
@@ -178,3 +182,8 @@ def confirm_machine(values: dict, effects_by_joint: dict, rec, ssp=None, effect_
                     "shrink": round(shrink({f"{c}_{j}": before[j][c] for j in joints for c in before[j]},
                                            {f"{c}_{j}": after[j][c] for j in joints for c in after[j]}), 4)})
     return doc
+
+__all__ = [
+    "AGREEMENT", "default_ssp", "fmu_parameters", "run_fmus", "confirm", "agreement",
+    "machine_parameters", "run_machine_fmus", "confirm_machine",
+]

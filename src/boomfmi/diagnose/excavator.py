@@ -19,7 +19,10 @@ recording's own noise floor plus ``ABS_FLOOR`` (``attribute``'s margins); the lo
 cut's threshold adds its model's own error (:func:`_model_error`: the least gap its load,
 or a friction candidate, leaves on the fit recordings it is fitted on, less their noise),
 so a gap within what the cut cannot reproduce where it is fitted is no finding, and a
-friction candidate is named only on a gap beyond that.
+friction candidate is named only on a gap beyond that; and any finding of the load cut
+(a candidate named, or ``unexplained``) only on a gap beyond what the load's own
+uncertainty from the fit recordings moves the cut and what the joint's load identified
+on the holdout itself leaves (:func:`_own_load`: "cannot tell", said in the notes).
 
 **Every effect on any joint.**  On a flagged cut each candidate of the catalogue
 (``model/catalogue.py``) that acts there is fitted **on the fit recordings' cuts** of that
@@ -29,10 +32,11 @@ takes the effects of the stages ``spool`` (valve_dynamics: the spool's lag is a 
 the cut), ``command``, ``port``, ``seal``, ``heat`` (the cut carries the air masses) and
 ``measurement`` (sensor_lag: the cut's pressures as the sensors report them,
 ``model.measure``; and, since the angle sensor lags alike, the cut is driven by the
-motion the measured angle lags behind, :func:`unlagged`; the lag is the data
-acquisition's, on every joint's channels as the excavator bridge's ``tau_sensor``, so
-what it makes worse on the other joints' holdout cuts counts against it: on one joint's
-cut alone a sensor's lag and a slow spool are the same delay of the pressures'
+motion the measured angle lags behind, :func:`unlagged`; the lag is taken to be the data
+acquisition's, on every joint's channels as the excavator bridge's ``tau_sensor``,
+except on a joint whose own fit recordings refuse it, so what it makes worse on those
+other joints' holdout cuts counts against it (:func:`_hold_gaps`): on one joint's
+cut alone a sensor's lag and a slow spool are much the same delay of the pressures'
 answer to the command); the load cut the ``friction``
 stage's (stribeck_friction, pressure_friction, each law), with the joint's load
 re-identified with the effect on (``joint_load.fit_load_effect``), then the load (the
@@ -66,6 +70,8 @@ import numpy as np
 from ..compare import as_sensed
 from ..identify.preprocess import lowpass
 from ..model import EFFECTS, Boom, Model, measure
+from ..model.boom import measurement_lag
+from ..model.catalogue import capped
 from ..physics import linkage as exc
 from .attribute import (ABS_FLOOR, CANDIDATES, FORMS, GROW, GROW_EVALUATIONS, MIN_SHRINK, MIN_SHRINK_SECOND,
                         NOISE_FACTOR, PAIR_EVALUATIONS, PAIR_POOL, SCREEN, _halved, _map, _pays, fit_effects)
@@ -91,9 +97,7 @@ def joint_forms(name: str, joint: str, ex: exc.Excavator = exc.Excavator()) -> l
     for form in FORMS.get(name, [CANDIDATES[name]]):
         f = []
         for p, lo, hi, log in form:
-            if name == "end_cushioning" and p == "V_p":
-                hi = min(hi, 0.9 * min(cyl.V_a0, cyl.V_b0))
-            f.append((p, lo, hi, log))
+            f.append((p, lo, capped(EFFECTS[name], p, cyl, hi), log))
         out.append(f)
     return out
 
@@ -165,16 +169,28 @@ def unlagged(x, t, tau: float = 0.0, delay: float = 0.0, L: float | None = None)
     return np.clip(y, 0.0, L) if L is not None else y
 
 
+def _initial(t, p) -> float:
+    """A pressure's value at ``t[0]`` from its first samples: the least-squares line's
+    (their mean where there are fewer than three)."""
+    if len(p) < 3:
+        return float(np.mean(p))
+    slope, at0 = np.polyfit(np.asarray(t, float) - float(t[0]), np.asarray(p, float), 1)
+    return float(at0)
+
+
 def joint_pressures(cut, joint: str, ex: exc.Excavator = exc.Excavator(), effects: dict | None = None):
     """The joint's pneumatics (with ``effects``) on the cut: ``(p_a, p_b)`` [Pa, absolute],
     as the sensors report them."""
     effects = dict(effects or {})
-    lag = effects.pop("sensor_lag", {})
-    tau, delay = float(lag.get("tau", 0.0)), float(lag.get("delay", 0.0))
-    # the cut starts from the first 20 ms's mean pressures, not one noisy sample
+    tau, delay = measurement_lag(effects)      # the measurement stage's, applied to the outputs below
+    effects = {n: q for n, q in effects.items() if EFFECTS[n].stage != "measurement"}
+    # the cut starts from the first 20 ms's pressures, not one noisy sample: a line's value
+    # at the start (a recording that opens a valve at once fills a chamber at some bar per
+    # 10 ms from the first sample on; their mean would start it that much too full, and a
+    # chamber sealed after it keeps the excess)
     n0 = max(1, int(0.02 * cut.fs))
-    start = SimpleNamespace(**{**vars(cut), "p_a_raw": np.r_[np.mean(cut.p_a_raw[:n0]), cut.p_a_raw[1:]],
-                               "p_b_raw": np.r_[np.mean(cut.p_b_raw[:n0]), cut.p_b_raw[1:]]})
+    start = SimpleNamespace(**{**vars(cut), "p_a_raw": np.r_[_initial(cut.t[:n0], cut.p_a_raw[:n0]), cut.p_a_raw[1:]],
+                               "p_b_raw": np.r_[_initial(cut.t[:n0], cut.p_b_raw[:n0]), cut.p_b_raw[1:]]})
     if tau > 0.0 or delay > 0.0:     # the angle lags as the pressures do: the cut moves as the piston did
         start.x = unlagged(cut.x, cut.t, tau, delay, getattr(cut, "L", None))
     pa, pb = simulate_pneumatics(start, joint_model(joint, ex, effects))
@@ -307,15 +323,21 @@ def _mean_gap(cuts, joint, ex, effects) -> float:
 
 
 def _hold_gaps(joint, ex, effects, hold_cuts, others) -> list:
-    """Each holdout's gap of ``joint``'s cut with ``effects``.  A measurement effect is
-    the data acquisition's (the bridge's sensor_lag lags every joint's channels): what
-    it makes worse on the other joints' cuts (``others``: [(joint, their holdout cuts,
-    their gaps without)]) is added to the joint's gap, so that a lag that only suits
-    one joint's pressures (as a slow spool's does) does not pass for the sensors'."""
+    """Each holdout's gap of ``joint``'s cut with ``effects``.  A measurement effect may be
+    the data acquisition's (the bridge's sensor_lag lags every joint's channels) or one
+    joint's sensors': it is taken to be on another joint's channels unless that joint's
+    fit recordings reject it (its lag there makes their gap worse beyond their noise's
+    threshold).  What it makes worse on the holdout cuts of the joints it is taken to be
+    on (``others``: [(joint, their holdout cuts, their gaps without, their fit cuts,
+    their fit gap without, their fit noise)]) is added to the joint's gap, so that a lag
+    that only suits one joint's pressures (as a slow spool's does) does not pass for the
+    sensors'; a lag the other joints' own fit recordings refuse is this joint's alone."""
     gaps = [joint_gap(c, joint, ex, effects) for c in hold_cuts]
     if any(EFFECTS[n].stage == "measurement" for n in effects):
         lag = {n: q for n, q in effects.items() if EFFECTS[n].stage == "measurement"}
-        for other, cuts, before in others:
+        for other, cuts, before, fit_cuts, fit_before, fit_noise in others:
+            if _mean_gap(fit_cuts, other, ex, lag) > fit_before + threshold(fit_noise):
+                continue            # not on that joint's channels: its fit recordings refuse it
             gaps = [g + max(joint_gap(c, other, ex, lag) - b, 0.0) for g, c, b in zip(gaps, cuts, before)]
     return gaps
 
@@ -466,18 +488,33 @@ def _model_error(cut: CutFinding, fit_noise: float) -> float:
     return max(least - fit_noise, 0.0)
 
 
-def _own_load(f: JointFinding, jl, hold_cuts, notes: list) -> None:
-    """A load cut's gap that no friction candidate explains is ``unexplained`` only where
-    the joint's load identified on each holdout itself (no effect) still leaves it beyond
-    the threshold: a gap that this closes is the fit recordings' uncertainty of the load
-    (a static friction they did not pin), which is no finding (``attribute``'s rule for
-    a gap within the baseline's own uncertainty); where the holdout holds too little of
-    the joint's motion to identify its load there, the gap cannot be judged: no finding,
-    said in the notes.  Nothing is fitted on the holdout for a candidate's score."""
+def _own_load(f: JointFinding, jl, hold_cuts, notes: list, fit_cuts=(), fit_noise: float = 0.0) -> None:
+    """A load cut's finding (a friction candidate named, or ``unexplained``) stands only
+    where the gap is beyond what the joint's load itself leaves open: beyond the
+    threshold plus what the load's uncertainty from the fit recordings moves the cut
+    (``joint_load.load_spread``), and beyond what the joint's load identified on each
+    holdout itself (no effect) leaves there.  A gap that this closes is the fit
+    recordings' uncertainty of the load (a static friction, a payload they did not pin),
+    which is no finding (``attribute``'s rule for a gap within the baseline's own
+    uncertainty): "cannot tell", said in the notes.  A named candidate stands where its
+    holdout gaps are below what the holdout's own load leaves (by more than their noise
+    floor: it explains what no load does), or where the fit recordings (``fit_cuts``,
+    their noise ``fit_noise``) refuse the holdout's own load (their gap with it beyond
+    their own gap plus their noise's threshold): the two recordings need two loads, the
+    difference the candidate explains, which is no uncertainty of one load.  Where the
+    holdout holds too little of the joint's motion to identify its load there, an
+    unexplained gap cannot be judged (no finding, said); a named candidate stands.
+    Nothing is fitted on the holdout for a candidate's score."""
     lc = f.position
+    named = lc.verdict != ["unexplained"]
+    best = lc.candidates[0] if named and lc.candidates else None
+    what = f"{'+'.join(lc.verdict)}@{f.joint} not named" if named else "not a finding"
     try:
-        own = [jl.refine_load([c], jl.identify_load([c], {}), {})[1] for c in hold_cuts]
+        loads = [jl.refine_load([c], jl.identify_load([c], {}), {}) for c in hold_cuts]
+        own = [g for _, g in loads]
     except (ValueError, ArithmeticError) as e:
+        if named:
+            return
         # the holdout holds too little of the joint's motion to tell a gap of its load
         # from the load's own uncertainty: not judged, said
         lc.verdict = []
@@ -485,6 +522,12 @@ def _own_load(f: JointFinding, jl, hold_cuts, notes: list) -> None:
                      f"identified on the holdout itself ({e}); not a finding")
         return
     lc.own_gaps = own
+    if best is not None and all(a < o - n for a, o, n in zip(best.hold_gaps, own, lc.noises)):
+        return
+    if best is not None and fit_cuts and math.isfinite(lc.fit_gap):
+        refused = lc.fit_gap + threshold(fit_noise)
+        if any(float(np.mean([jl.load_gap(c, v, {}) for c in fit_cuts])) > refused for v, _ in loads):
+            return
     # what the load's own uncertainty (F_s's 95 % interval from the fit recordings' starts)
     # moves the cut's position by: a gap within the threshold plus that is no finding
     lc.spreads = [jl.load_spread(c, lc.values, {}) for c in hold_cuts]
@@ -492,14 +535,31 @@ def _own_load(f: JointFinding, jl, hold_cuts, notes: list) -> None:
         lc.verdict = []
         notes.append(f"{f.joint}: the load cut's gap ({100 * lc.gap:.2f} %) is within what the uncertainty of the "
                      f"{f.joint}'s static friction moves it ({100 * float(np.mean(lc.spreads)):.2f} % beyond the "
-                     f"noise's threshold): the fit recordings do not pin its starts closely enough to tell; "
-                     f"not a finding")
+                     f"noise's threshold): the fit recordings do not pin its starts closely enough to tell; {what}")
         return
     if all(g <= h + s for g, h, s in zip(own, lc.thresholds, lc.spreads)):
         lc.verdict = []
         notes.append(f"{f.joint}: the load cut's gap ({100 * lc.gap:.2f} %) is within what the joint's load "
                      f"identified on the holdout itself leaves ({100 * float(np.mean(own)):.2f} %): the fit "
-                     f"recordings do not pin the {f.joint}'s load, no friction effect explains it; not a finding")
+                     f"recordings do not pin the {f.joint}'s load, and no friction effect explains more than a "
+                     f"load identified there; {what}")
+
+
+def _judge_load(f: JointFinding, jl, fit_cuts, hold_cuts, notes: list) -> None:
+    """The load cut's verdict, its candidates fitted: its threshold with the model's own
+    error (:func:`_model_error`), the best candidate or ``unexplained`` (:func:`_decide`),
+    then any finding held against the load's own uncertainty (:func:`_own_load`)."""
+    lc = f.position
+    was = lc.flagged
+    fit_noise = float(np.mean([jl.load_noise(c) for c in fit_cuts]))
+    lc.model_error = _model_error(lc, fit_noise)
+    if was and not lc.flagged:
+        notes.append(f"{f.joint}: the load cut's gap ({100 * lc.gap:.2f} %) is within what its model leaves "
+                     f"on the fit recordings themselves ({100 * lc.model_error:.2f} % beyond their noise) "
+                     f"plus the noise's threshold: the model's own error; not a finding")
+    _decide(lc, [])
+    if lc.verdict:
+        _own_load(f, jl, hold_cuts, notes, fit_cuts, fit_noise)
 
 
 def _load_module():
@@ -556,11 +616,14 @@ def diagnose_excavator(fit, hold, ex: exc.Excavator = exc.Excavator(), joints=ex
                 findings[joint].load_note = f"{joint}'s load cut: {e}"
                 notes.append(findings[joint].load_note)
     # every candidate on every flagged cut, at once
-    others = {j: [(o, hold_cuts[o], findings[o].pressures.gaps) for o in joints if o != j] for j in joints}
+    fit_without = {j: (_mean_gap(fit_cuts[j], j, ex, {}), float(np.mean([joint_noise(c) for c in fit_cuts[j]])))
+                   for j in joints}
+    others = {j: [(o, hold_cuts[o], findings[o].pressures.gaps, fit_cuts[o], *fit_without[o]) for o in joints if o != j]
+              for j in joints}
     jobs = []
     for joint, f in findings.items():
         if f.pressures.flagged:
-            f.pressures.fit_gap = _mean_gap(fit_cuts[joint], joint, ex, {})
+            f.pressures.fit_gap = fit_without[joint][0]
             jobs += [("pressures", joint, name, ex, fit_cuts[joint], hold_cuts[joint], f.pressures.fit_gap,
                       others[joint]) for name in candidates(PNEUMATIC_STAGES)]
         if f.position is not None and f.position.flagged:
@@ -595,17 +658,14 @@ def diagnose_excavator(fit, hold, ex: exc.Excavator = exc.Excavator(), joints=ex
     for joint, f in findings.items():
         _decide(f.pressures, pairs[joint])
         if f.position is not None:
-            lc = f.position
-            was = lc.flagged
-            lc.model_error = _model_error(lc, float(np.mean([jl.load_noise(c) for c in load_fit[joint]])))
-            if was and not lc.flagged:
-                notes.append(f"{joint}: the load cut's gap ({100 * lc.gap:.2f} %) is within what its model leaves "
-                             f"on the fit recordings themselves ({100 * lc.model_error:.2f} % beyond their noise) "
-                             f"plus the noise's threshold: the model's own error; not a finding")
-            _decide(lc, [])
-            if f.position.verdict == ["unexplained"]:
-                _own_load(f, jl, load_hold[joint], notes)
+            _judge_load(f, jl, load_fit[joint], load_hold[joint], notes)
     order = sorted((f for f in findings.values() if f.flagged),
                    key=lambda f: -max(c.excess for c in f.cuts if c.flagged))
     verdict = [f"{name}@{f.joint}" for f in order for name in f.verdict]
     return ExcavatorDiagnosis(findings, verdict, notes)
+
+__all__ = [
+    "PNEUMATIC_STAGES", "LOAD_STAGES", "candidates", "joint_forms", "joint_cut", "joint_model",
+    "P_SPAN_MIN", "joint_noise", "threshold", "unlagged", "joint_pressures", "joint_gap", "Fitted",
+    "CutFinding", "JointFinding", "ExcavatorDiagnosis", "diagnose_excavator",
+]

@@ -12,7 +12,7 @@ diagnosis of :mod:`boomfmi.diagnose.excavator` (read its docstring):
   recordings' cuts and scored on the holdouts' (``shrink`` = 1 - gap after / gap
   before, the holdouts' mean), pairs where the best single leaves a gap;
 - the FIT recordings also identify the whole machine's baseline (each cylinder's K_v,
-  F_s, F_d and the payload, ``identify.excavator_outputs``), reported with its 95 %
+  F_s, F_d and the payload, ``identify.outputs``), reported with its 95 %
   intervals and its NRMSE per joint on the holdouts.  The cuts do not use it
   (``used_by_verdict``: false): the pneumatic cut runs on the measured motion, the load
   cut re-identifies its joint's load itself.
@@ -48,8 +48,10 @@ import numpy as np
 
 from .._json import dumps, plain
 from ..compare import as_sensed
-from ..identify.excavator_outputs import (bound_machine, cannot_tell, excavator_nrmse, identify_recs, machine_for,
-                                          measured_pistons, simulate_machine, ssv_values)
+from ..identify import identify_recs
+from ..identify.outputs import (bound_machine, cannot_tell, joint_nrmse as excavator_nrmse, measured_pistons,
+                                simulate_machine, ssv_values)
+from ..identify.preprocess import machine_for
 from ..physics import reference_rig
 from ..physics.linkage import JOINTS
 from ..outputs import OutputSet

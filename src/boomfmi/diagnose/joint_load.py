@@ -3,7 +3,7 @@
 The excavator's pneumatic cut (``diagnose/excavator.py``) runs a joint's valve and
 chambers on its measured motion; an effect on the joint's friction shows there only
 through that motion, which is measured.  The **load cut** is the other half: the joint
-as an equivalent single cylinder (``identify.excavator.prepare_excavator``: unit areas,
+as an equivalent single cylinder (``identify.preprocess.prepare_machine``: unit areas,
 its own diagonal mass ``M_x[i, i]`` at each posture, and the net force on it, the
 pneumatic force from its recorded pressures minus everything the other joints'
 measured motion, gravity, the payload and the tip force put on it), simulated forward
@@ -17,18 +17,25 @@ sensor reads it (``compare.as_sensed``).
 motion (at least :data:`REST` long, ``identify.fit.motion_modes``), once it has settled,
 it restarts at the measured position, at rest, so that a friction level wrong by a
 little drifts over one motion, not over the whole recording, while every start (F_s)
-and every slide (K_v, F_d, the effects) is the model's own.
+and every slide (K_v, F_d, the effects) is the model's own.  It restarts, too, after
+another joint's end-stop impact, whose impulse the cut knows only as a filtered
+acceleration; the samples within the filter's spread of it are not judged
+(``LoadCut.judged``).
+
+**The payload** is the one the joint's own motion pins (:func:`_payload`): the whole
+machine's equation error gives it with an interval; within that interval widened by its
+width, the value at which the joint's load leaves the least gap on the fit recordings.
 
 **The load with an effect.**  The joint's K_v, F_s and F_d are identified with the
 effect on (:func:`identify_load`) by the stages the excavator's identification uses:
 the equation error over every sample with the linkage's terms known
-(``identify.excavator.equation_rows``, this joint's rows; the payload from the whole
-machine's ``identify.excavator.equation_error``, without the effect), its friction
+(``identify.joints.equation_rows``, this joint's rows; the payload from the whole
+machine's ``identify.joints.equation_error``, without the effect), its friction
 column split along the Stribeck curve at the measured speed as
 ``identify.fit.equation_rows`` splits the boom's; then the static friction from every
 start (``identify.fit.static_friction`` on the equivalent cylinder, with the joint's
 mass where each start happens and the other joints' share of the net force as its
-uncertainty, as ``identify.excavator.identify_excavator`` does).  A seal-pressure
+uncertainty, as ``identify.joints.identify_joints`` does).  A seal-pressure
 coefficient is held: its friction is taken off the net force (against the motion while
 sliding, against the drive at rest, never beyond it), so that every stage sees the
 friction that is left.  :func:`fit_load_effect` searches each law's parameter over the
@@ -51,13 +58,14 @@ import numpy as np
 
 from .. import physics as ph
 from ..compare import as_sensed
-from ..identify.excavator import EE_CUTOFF, JOINTS, JointData, _equivalent, _honest_static
-from ..identify.excavator import equation_error as machine_equation_error
-from ..identify.excavator import equation_rows as machine_equation_rows, prepare_excavator
-from ..identify.excavator_outputs import machine_for
+from ..identify.joints import EE_CUTOFF, JOINTS, equivalent as _equivalent, honest_static as _honest_static
+from ..identify.joints import equation_error as machine_equation_error
+from ..identify.joints import equation_rows as machine_equation_rows
+from ..identify.preprocess import JointData, machine_for, prepare_machine as prepare_excavator
 from ..identify.fit import PRESSURE_COEFFICIENT, Motion, motion, runs, static_friction
 from ..identify.preprocess import lowpass
 from ..model import EFFECTS, Boom, Model, check_effects
+from ..model.catalogue import LOAD_LAWS
 from ..physics import effects as fx
 from ..physics import linkage as exc
 from .attribute import fit_effects
@@ -80,13 +88,14 @@ STAGES = ("friction",)
 class LoadCut:
     """One recording's joint as its load cut (:func:`load_cut`)."""
     joint: str
-    data: JointData                 #: this joint (``identify.excavator.JointData``)
+    data: JointData                 #: this joint (``identify.preprocess.JointData``)
     machine: list                   #: every joint's JointData (the payload's equation error)
     ex: exc.Excavator
     p_a: np.ndarray                 #: the joint's chamber pressures [Pa, absolute], as recorded
     p_b: np.ndarray
     episodes: list                  #: (first, end, x0 [m], v0 [m/s]) from rest to rest
     source: str = ""                #: the recording's path ("" for a DataFrame)
+    judged: np.ndarray | None = None  #: the samples its gap is taken over (:func:`_judged`; None: all)
     _cache: dict = field(default_factory=dict, repr=False)   #: its equation-error rows, its equivalent motions
 
     @property
@@ -179,12 +188,34 @@ def _impacts(data: list, i: int) -> list:
     return sorted(out)
 
 
+def _settle(jd: JointData) -> int:
+    """Samples over which the filtered acceleration spreads an impulse: two periods of
+    the filter's cut-off (``jd.p.cutoff``), on either side (the filter is zero-phase)."""
+    return int(round(2.0 * jd.p.fs / jd.p.cutoff))
+
+
+def _judged(jd: JointData, impacts: list) -> np.ndarray | None:
+    """The samples the load cut's gap is taken over: all but those within
+    :func:`_settle` of another joint's impact (:func:`_impacts`), where the cut knows the
+    stop's impulse only as a filtered acceleration spread on both sides of it, and so
+    cannot follow this joint (the restart after it, :func:`_split_at_impacts`, keeps the
+    error from running on; what the joint did through the impact is not judged).  None
+    where nothing is left out, or where it would leave less than half the recording."""
+    if not impacts:
+        return None
+    n, settle = len(jd.p.t), _settle(jd)
+    keep = np.ones(n, bool)
+    for k in impacts:
+        keep[max(k - settle, 0):k + settle] = False
+    return keep if np.count_nonzero(keep) >= n // 2 else None
+
+
 def _split_at_impacts(episodes: list, jd: JointData, impacts: list) -> list:
     """The episodes restarted where another joint's impact has passed (two periods of the
     filter's cut-off after it, ``jd.p.cutoff``), at the measured position and speed
     (smoothed, as a recording that starts in motion), so that an impact the cut cannot
     follow costs it one motion's error, not the rest of the run."""
-    settle = int(round(2.0 * jd.p.fs / jd.p.cutoff))
+    settle = _settle(jd)
     restarts = sorted({k + settle for k in impacts if k + settle < len(jd.p.t)})
     out = []
     for i0, i1, x0, v0 in episodes:
@@ -199,7 +230,7 @@ def _split_at_impacts(episodes: list, jd: JointData, impacts: list) -> list:
 def load_cut(rec, joint: str, ex: exc.Excavator | None = None) -> LoadCut:
     """The load cut of ``joint`` on one excavator recording (a ``recording.Recording`` or
     a DataFrame in the excavator's format, pressures gauge); ``ex`` the machine (default
-    ``identify.excavator_outputs.machine_for(rec)``'s: excavator.md's with the
+    ``identify.preprocess.machine_for(rec)``'s: excavator.md's with the
     recording's P_atm)."""
     if joint not in JOINTS:
         raise ValueError(f"the load cut is of a joint: one of {', '.join(JOINTS)}, not {joint!r}")
@@ -215,10 +246,11 @@ def load_cut(rec, joint: str, ex: exc.Excavator | None = None) -> LoadCut:
     i = JOINTS.index(joint)
     P_atm = float(rec.P_atm) if hasattr(rec, "P_atm") else ex.P_atm
     jd = data[i]
+    impacts = _impacts(data, i)
     return LoadCut(joint, jd, data, ex, d[f"p_a_{joint}"].to_numpy(float) + P_atm,
                    d[f"p_b_{joint}"].to_numpy(float) + P_atm,
-                   _split_at_impacts(_episodes(jd), jd, _impacts(data, i)),
-                   str(getattr(rec, "path", "")))
+                   _split_at_impacts(_episodes(jd), jd, impacts),
+                   str(getattr(rec, "path", "")), _judged(jd, impacts))
 
 
 def load_noise(cut: LoadCut) -> float:
@@ -244,14 +276,31 @@ def _friction_effects(effects) -> dict:
     return effects
 
 
+def _load_law_params(effects: dict, law: str) -> dict:
+    """The parameters that are on of the friction effects that enter the load's own
+    identification by ``law`` (``Effect.load_law``); ValueError naming a friction effect
+    that has no such law (the load cut identifies no other)."""
+    out = {}
+    for name, q in effects.items():
+        e = EFFECTS[name]
+        if e.load_law == law:
+            out.update({k: v for k, v in q.items() if v > 0.0})
+        elif e.load_law not in LOAD_LAWS:
+            raise ValueError(f"effects.{name}: the load cut identifies a friction effect by its load law "
+                             f"({', '.join(LOAD_LAWS)}), and {name} has none")
+    return out
+
+
 def _seal_term(effects: dict):
-    """pressure_friction's ``(law, coefficient)`` (``identify.fit.PRESSURE_COEFFICIENT``'s
-    laws), or ``(None, 0.0)``; one law at a time."""
-    q = {k: v for k, v in effects.get("pressure_friction", {}).items() if v > 0.0}
+    """The seal-pressure law's ``(law, coefficient)`` (``identify.fit.PRESSURE_COEFFICIENT``'s
+    laws) of the effect whose ``load_law`` is ``"seal_pressure"``, or ``(None, 0.0)``; one
+    law at a time."""
+    q = _load_law_params(effects, "seal_pressure")
     if not q:
         return None, 0.0
     if len(q) > 1:
-        raise ValueError(f"effects.pressure_friction: the load cut fits one seal-pressure law at a time, "
+        names = ", ".join(n for n, e in effects.items() if EFFECTS[n].load_law == "seal_pressure")
+        raise ValueError(f"effects.{names}: the load cut fits one seal-pressure law at a time, "
                          f"got {', '.join(sorted(q))}")
     (name, c), = q.items()
     return next(law for law, k in PRESSURE_COEFFICIENT.items() if k == name), float(c)
@@ -309,12 +358,16 @@ def simulate(cut: LoadCut, values: dict, effects: dict | None = None) -> np.ndar
 def load_gap(cut: LoadCut, values: dict, effects: dict | None = None) -> float:
     """The load cut's gap: the NRMSE of the simulated position (:func:`simulate`, as the
     sensor reads it, ``compare.as_sensed``) against the measured one, over its range
-    (at least :data:`X_SPAN_MIN`); inf where the simulation is not finite."""
+    (at least :data:`X_SPAN_MIN`) and the samples it judges (``cut.judged``); inf where
+    the simulation is not finite."""
     xs = simulate(cut, values, effects)
     if not np.all(np.isfinite(xs)):
         return math.inf
     m = cut.x
-    return float(np.sqrt(np.mean((m - as_sensed(m, xs)) ** 2))) / cut.span
+    e = m - as_sensed(m, xs)
+    if cut.judged is not None:
+        e = e[cut.judged]
+    return float(np.sqrt(np.mean(e ** 2))) / cut.span
 
 
 def load_spread(cut: LoadCut, values: dict, effects: dict | None = None) -> float:
@@ -336,30 +389,78 @@ def load_spread(cut: LoadCut, values: dict, effects: dict | None = None) -> floa
     a, b = simulate(cut, values, effects), simulate(cut, moved, effects)
     if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
         return 0.0
-    return float(np.sqrt(np.mean((a - b) ** 2))) / cut.span
+    e = a - b if cut.judged is None else (a - b)[cut.judged]
+    return float(np.sqrt(np.mean(e ** 2))) / cut.span
 
 
 # ----------------------------------------------------------------------------- identify
-_payloads: list = []     #: (cuts' machines, payload)
+_payloads: list = []     #: (joint or None, cuts' machines, payload or the machine's (value, lo, hi))
+
+
+def _cached(key, machines, make):
+    for k, seen, value in _payloads:
+        if k == key and len(seen) == len(machines) and all(a is b for a, b in zip(seen, machines)):
+            return value
+    value = make()
+    _payloads.append((key, machines, value))
+    del _payloads[:-16]
+    return value
+
+
+def _machine_payload(cuts) -> tuple:
+    """The payload [kg] from the whole machine's equation error over the cuts'
+    recordings (``identify.joints.equation_error``): ``(value, lower, upper)``, its
+    95 % interval (one per set of recordings, shared by its joints)."""
+    machines = [c.machine for c in cuts]
+
+    def make():
+        est, _ = machine_equation_error(machines, n_boot=20)
+        e = est["payload"]
+        return float(e.value), float(e.ci95[0]), float(e.ci95[1])
+    return _cached(None, machines, make)
 
 
 def _payload(cuts) -> float:
-    """The payload [kg] from the whole machine's equation error over the cuts'
-    recordings (``identify.excavator.equation_error``), >= 0."""
+    """The payload [kg] as this joint's load cut sees it, >= 0: the whole machine's
+    equation error's (:func:`_machine_payload`), then the value that lets the joint's
+    load (identified at it, :func:`identify_load`) leave the least gap on ``cuts``
+    (a bounded scalar search over its 95 % interval widened by the interval's width on
+    either side).  The equation error pins the payload only where the recordings move
+    the joints against gravity in many postures; on slow ramps (an operator's joystick)
+    its interval is wide and its value may be far off, and every joint's load, fitted
+    at it, takes up the difference: the output error of the joint's own motion pins it."""
     machines = [c.machine for c in cuts]
-    for seen, value in _payloads:
-        if len(seen) == len(machines) and all(a is b for a, b in zip(seen, machines)):
-            return value
-    est, _ = machine_equation_error(machines, n_boot=20)
-    value = max(float(est["payload"].value), 0.0)
-    _payloads.append((machines, value))
-    del _payloads[:-4]
-    return value
+
+    def make():
+        from scipy.optimize import minimize_scalar
+        value, lo, hi = _machine_payload(cuts)
+        w = hi - lo
+        a, b = max(lo - w, 0.0), max(hi + w, 0.0)
+        start = min(max(value, 0.0), b)
+        if not (math.isfinite(a) and math.isfinite(b)) or b - a <= 1e-6 * max(b, 1.0):
+            return start
+
+        def cost(P):
+            try:
+                values = identify_load(cuts, {}, payload=P)
+                return float(np.mean([load_gap(c, values) for c in cuts]))
+            except (ValueError, ArithmeticError):
+                return math.inf
+        res = minimize_scalar(cost, bounds=(a, b), method="bounded",
+                              options={"xatol": PAYLOAD_TOLERANCE * (b - a), "maxiter": PAYLOAD_EVALUATIONS})
+        return float(res.x) if math.isfinite(res.fun) and res.fun < cost(start) else start
+    return _cached(cuts[0].joint, machines, make)
+
+
+#: the payload's search (:func:`_payload`): its tolerance (a share of the searched range)
+#: and its evaluations at most
+PAYLOAD_TOLERANCE = 0.02
+PAYLOAD_EVALUATIONS = 14
 
 
 def _motion(cut: LoadCut, payload: float, c: float, law: str | None) -> Motion:
     """The equivalent cylinder's Motion (``identify.fit.motion`` of
-    ``identify.excavator._equivalent``) with the seals' friction of coefficient ``c``
+    ``identify.joints.equivalent``) with the seals' friction of coefficient ``c``
     by ``law`` taken off the net force: against the motion while sliding, against the
     drive at rest (never beyond it)."""
     key = (round(payload, 9), c, law)
@@ -394,7 +495,7 @@ def _seal_force(cut: LoadCut, c: float, law: str) -> np.ndarray:
 
 def _rows(cut: LoadCut):
     """The whole machine's equation-error rows of the cut's recording
-    (``identify.excavator.equation_rows``), this joint's usable ones: ``(X, y)``."""
+    (``identify.joints.equation_rows``), this joint's usable ones: ``(X, y)``."""
     if "rows" not in cut._cache:
         X, y, use, which = machine_equation_rows(cut.machine)
         sel = use & (which == cut.index)
@@ -403,7 +504,7 @@ def _rows(cut: LoadCut):
 
 
 def _equation_error(cuts, payload: float, v_s: float, law: str | None, c: float) -> dict:
-    """Stage 1 for one joint with the effect: ``identify.excavator``'s rows of that joint
+    """Stage 1 for one joint with the effect: ``identify.joints``'s rows of that joint
     (the linkage's terms known, the payload held), its friction column split along the
     Stribeck curve at the measured speed (``v_s`` > 0: F_d (1 - w) + F_s w, as
     ``identify.fit.equation_rows``) and the held seals' friction taken off; least
@@ -439,11 +540,11 @@ def _equation_error(cuts, payload: float, v_s: float, law: str | None, c: float)
     return out
 
 
-def identify_load(fit_cuts, effects: dict | None = None) -> dict:
-    """The joint's load (``K_v``, ``F_s``, ``F_d`` [SI], and the machine's ``payload``
-    [kg]) identified on its fit cuts with ``effects`` on (the friction stage's:
+def identify_load(fit_cuts, effects: dict | None = None, payload: float | None = None) -> dict:
+    """The joint's load (``K_v``, ``F_s``, ``F_d`` [SI], and the ``payload`` [kg] as the
+    joint sees it, :func:`_payload`, unless given) identified on its fit cuts with ``effects`` on (the friction stage's:
     stribeck_friction's v_s, a pressure_friction coefficient, held), by the stages of
-    ``identify.excavator`` (the equation error over every sample, the linkage's terms
+    ``identify.joints`` (the equation error over every sample, the linkage's terms
     known) and ``identify.fit`` (the static friction from every start, on the
     equivalent cylinder with the joint's mass where each start happens).  ValueError
     where the cuts hold too little motion, or are of different joints."""
@@ -451,10 +552,10 @@ def identify_load(fit_cuts, effects: dict | None = None) -> dict:
     if not cuts:
         raise ValueError("identify_load needs at least one fit cut")
     effects = _friction_effects(effects)
-    v_s = float(effects.get("stribeck_friction", {}).get("v_s", 0.0))
+    v_s = float(next(iter(_load_law_params(effects, "stribeck").values()), 0.0))
     law, c = _seal_term(effects)
     _check_motion(cuts)
-    payload = _payload(cuts)
+    payload = _payload(cuts) if payload is None else max(float(payload), 0.0)
     joint = cuts[0].joint
     values = _equation_error(cuts, payload, v_s, law, c)
     for k in ("K_v", "F_d"):

@@ -171,3 +171,6 @@ def localise(p: Prepared, model_sim, model: Model, lag_max: float = 0.02) -> Loc
     subsystem_share = {s: round(sum(v[0] for k, v in cells.items() if k[2] == s), 4)
                        for s in ("valve", "cylinder", "boom_load")}
     return Localisation(nrmse, where, regime_share, subsystem_share, lag / p.fs, best_gain)
+
+
+__all__ = ["REGIMES", "regimes", "simulate_pneumatics", "Localisation", "localise"]

@@ -12,6 +12,8 @@ import base64
 import html
 import io
 import json
+import os
+import time
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +35,7 @@ MIN_TRAVEL = 1e-3     #: [m] a recording whose piston moves less than this canno
 
 
 def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=None, progress=None,
-             baseline=None, machine=None) -> dict:
+             baseline=None, machine=None, propose=None) -> dict:
     """Run the diagnosis and write its outputs into ``out_dir`` (as one set: all of them
     or, on an error or interrupt, none; a PNG this run does not draw is removed); return
     the JSON document.  ``workers``: processes for the candidates' fits (default: one
@@ -44,7 +46,14 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
     "fit")``'s ``(FitResult, recordings)``, or a callable returning them, called only
     where the recordings can be judged (a memoised one then gives the caller the same);
     default: identified here.  ``machine``: a ``machine.MachineFile`` the recordings are of
-    (default: their sidecars, else the reference rig, which is then said)."""
+    (default: their sidecars, else the reference rig, which is then said).
+
+    Where the two most probable explanations are close (``propose.ambiguous``), the
+    experiment that would tell them apart is proposed (``doc["next_experiment"]``, its
+    predictions in ``next_experiment.png``, shown in the report); ``propose``: a path to
+    write its command CSV to (``propose.write_command_csv``), proposed between the two
+    most probable however far apart they are (``doc["next_experiment"]["needed"]`` says
+    whether they were close)."""
     say = progress or (lambda text: None)
     if not hold_paths:
         raise ValueError("diagnose needs at least one holdout recording (--holdout): shrink is measured there")
@@ -91,6 +100,7 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
     # any kind, whose cases must be rescheduled at once if it is killed)
     pool = ProcessPoolExecutor(1) if may_start_processes() else None
     confirming = pool.submit(confirm, values, verdict_fx, hold, ssp, verdict_values) if pool else None
+    proposal = _next_experiment(att, values, hold_recs, workers, propose is not None, say)
     rig = rig_model(hold)            # the holdout's rig, from its sidecar, for all that follows
     prep = prepare(hold, geometry=rig.geometry, P_atm=rig.P_atm)
     base_sim = simulate_recording(values, hold, rig=rig)
@@ -101,7 +111,8 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
     effects = [{"name": c.name, "params": c.params,
                 **({"baseline_params": {k: round(v, 6) for k, v in c.values.items()}} if c.values else {}),
                 "nrmse_holdout_after": {k: round(v, 6) for k, v in c.holdout.items()},
-                "shrink": round(c.shrink, 4), "score": c.score} for c in att.candidates]
+                "fit_error": float(f"{c.fit_error:.6g}") if np.isfinite(c.fit_error) else None, "shrink": round(c.shrink, 4), "score": c.score}
+               for c in att.candidates]
     doc = {"judgeable": True,
            "baseline": {"params": {k: round(v, 6) for k, v in values.items()},
                         "ci95": {k: [_finite(z) for z in e.ci95] for k, e in result.params.items()},
@@ -114,9 +125,15 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
            "gap_beyond_noise": att.gap,
            "told_by_load_fit": att.told,
            "unexplained_threshold": round(att.threshold, 6),
+           "probabilities": {k: round(v, 4) for k, v in att.probabilities.items()},
+           "effective_samples": {k: round(v, 1) for k, v in att.effective_samples.items()},
+           "effective_samples_fit": round(att.fit_samples, 1),
+           "fit_error_baseline": float(f"{att.fit_error:.6g}") if np.isfinite(att.fit_error) else None,
            "where": loc.where if loc else [],
            "effects": effects,
            "verdict": att.verdict}
+    if proposal is not None:
+        doc["next_experiment"] = {**proposal[0].summary(), "needed": proposal[1]}
     after_sim = simulate_recording(verdict_values, hold, effects=verdict_fx, rig=rig) if verdict_fx else None
     try:
         doc["confirmation"] = (confirming.result() if pool else
@@ -128,8 +145,45 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
             pool.shutdown()
     if after_sim is not None and "shrink" in doc["confirmation"]:
         doc["confirmation"] = agreement(doc["confirmation"], shrink(nrmse(base_sim, hold), nrmse(after_sim, hold)))
-    _write(out, doc, hold, base_sim, after_sim, loc)
+    if proposal is not None and propose is not None:
+        doc["next_experiment"]["csv"] = str(propose)
+    _write(out, doc, hold, base_sim, after_sim, loc, proposal[0] if proposal else None)
+    if proposal is not None and propose is not None:
+        from ..recording import recording_inputs
+        from .propose import write_command_csv
+        write_command_csv(proposal[0], propose, inputs=recording_inputs([*fit_paths, *hold_paths]))
     return doc
+
+
+def _next_experiment(att, values: dict, hold_recs, workers, always: bool, say):
+    """``(Proposal, needed)`` for the two most probable explanations where they are close
+    (``needed``), or ``always``; None where there is nothing to tell apart (no catalogue
+    set among the probabilities)."""
+    from .attribute import set_name
+    from .propose import Hypothesis, ambiguous, noise_sigma, propose
+    pair = ambiguous(att.probabilities)
+    needed = pair is not None
+    if pair is None and always:
+        pair = ambiguous(att.probabilities, factor=float("inf"))
+    if pair is None:
+        return None
+    hyps = []
+    for name in pair:
+        c = next((c for c in att.candidates if set_name(c) == name), None)
+        if c is None:
+            hyps.append(Hypothesis(name, values))          # none: the baseline as identified
+        else:
+            hyps.append(Hypothesis(name, c.values or values, c.params if "+" in c.name else {c.name: c.params}))
+    p = att.probabilities
+    reason = (f"{pair[0]} ({p.get(pair[0], 0.0):.2g}) against {pair[1]} ({p.get(pair[1], 0.0):.2g})"
+              + (f"; unexplained ({p.get('unexplained', 0.0):.2g}) has no model: its most probable named "
+                 "explanation against the baseline" if "unexplained" in list(p)[:2] else ""))
+    say(f"proposing the experiment that tells {pair[0]} from {pair[1]}")
+    t0 = time.perf_counter()
+    proposal = propose(hyps, hold_recs[0], noise_sigma(hold_recs), workers=workers or os.cpu_count() or 1,
+                       reason=reason)
+    proposal.seconds = time.perf_counter() - t0
+    return proposal, needed
 
 
 def _finite(z) -> float | None:
@@ -137,15 +191,21 @@ def _finite(z) -> float | None:
 
 
 #: every file a diagnosis writes; those a run does not write are removed with its set
-OUTPUTS = ("diagnosis.json", "report.html", *(f"overlay_{c}.png" for c in CHANNELS), "residual_breakdown.png")
+OUTPUTS = ("diagnosis.json", "report.html", *(f"overlay_{c}.png" for c in CHANNELS), "residual_breakdown.png",
+           "next_experiment.png")
 
 
-def _write(out: Path, doc: dict, hold, base_sim, after_sim, loc=None) -> None:
+def _write(out: Path, doc: dict, hold, base_sim, after_sim, loc=None, proposal=None) -> None:
     with OutputSet(out, stale=OUTPUTS) as files:
         images = []
         if hold is not None:
             images = _plots(files, hold, base_sim, after_sim, loc, doc)
         embedded = {n: base64.b64encode(files.path(n).read_bytes()).decode("ascii") for n in images}
+        if proposal is not None:
+            from .propose import plot_proposal
+            plot_proposal(proposal, files.path("next_experiment.png"))
+            embedded["next_experiment.png"] = base64.b64encode(files.path("next_experiment.png").read_bytes()) \
+                .decode("ascii")
         chart = _candidates_chart(doc)
         if chart:
             embedded["candidates"] = chart
@@ -238,22 +298,23 @@ def _params_text(name: str, params: dict) -> str:
 
 
 def _candidates_chart(doc: dict) -> str | None:
-    """A bar chart of each candidate's holdout shrink (base64 PNG), the verdict's bar dark."""
-    cands = doc.get("effects") or []
-    if not cands:
+    """A bar chart of each explanation's probability (base64 PNG: the candidate sets,
+    ``none`` and ``unexplained``; ``attribute``'s evidence), the verdict's bar dark."""
+    probs = doc.get("probabilities") or {}
+    if not probs:
         return None
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    names = [c["name"] for c in cands][::-1]
-    values = [max(-0.5, min(1.0, c["shrink"])) for c in cands][::-1]
-    named = " + ".join(doc.get("verdict") or [])
-    colours = ["#1f4e79" if n == named or n in (doc.get("verdict") or []) else "#9dbbd6" for n in names]
+    names = list(probs)[::-1]
+    values = [float(probs[n]) for n in names]
+    verdict = doc.get("verdict") or []
+    named = "none" if not verdict else " + ".join(verdict)
+    colours = ["#1f4e79" if n == named else "#9dbbd6" for n in names]
     fig, ax = plt.subplots(figsize=(8, 0.35 * len(names) + 1.0))
     ax.barh(names, values, color=colours)
-    ax.axvline(0.0, color="k", lw=0.8)
-    ax.set_xlim(-0.5, 1.0)
-    ax.set_xlabel("share of the holdout gap the candidate removes (shrink; < 0: worse)")
+    ax.set_xlim(0.0, 1.0)
+    ax.set_xlabel("probability of the explanation, given the fit and holdout recordings")
     fig.tight_layout()
     buf = io.BytesIO()
     fig.savefig(buf, dpi=90, format="png")
@@ -320,7 +381,7 @@ def _html(doc: dict, images: list[str], embedded: dict | None = None) -> str:
     warnings = "".join(f"<li>{e(w)}</li>" for w in base.get("warnings") or [])
     warnings = f"<p><b>Warnings of the baseline's identification:</b></p><ul>{warnings}</ul>" if warnings else ""
     imgs = "".join(_img(n, embedded) for n in images)
-    chart = (f"<h2>How much each candidate explains</h2>{_img('candidates', embedded)}"
+    chart = (f"<h2>How probable each explanation is</h2>{_img('candidates', embedded)}"
              if embedded and "candidates" in embedded else "")
     noise = ", ".join(f"{e(k)} {100 * v:.3f} %" for k, v in (doc.get("noise_floor") or {}).items())
     spread = ", ".join(f"{e(k)} {100 * v:.3f} %" for k, v in (doc.get("baseline_spread") or {}).items())
@@ -341,10 +402,32 @@ td,th{{border:1px solid #ccc;padding:4px 8px;font-size:13px}}.act{{font-size:1.3
 {NOISE_FACTOR:g} times the noise floor ({noise}) and {100 * ABS_FLOOR:g} %;
 a gap no candidate explains is "unexplained" beyond {100 * doc.get("unexplained_threshold", 0.0):.3f} %, which adds the
 baseline's own spread ({spread}).</p>
-<table><tr><th>effect</th><th>fitted parameters</th><th>shrink</th><th>score</th>
+<table><tr><th>effect</th><th>fitted parameters</th><th>shrink</th><th>probability</th>
 <th>holdout NRMSE after (p_a / p_b / x)</th></tr>{rows}</table>
+{_next_experiment_html(doc, embedded)}
 {conf}
 </body></html>"""
+
+
+def _next_experiment_html(doc: dict, embedded: dict | None) -> str:
+    """The proposed experiment (``doc["next_experiment"]``) and its plot."""
+    n = doc.get("next_experiment")
+    if not n:
+        return ""
+    e = html.escape
+    text = lambda ps: ", ".join(f"{e(k)} = {e(str(v))}" for k, v in ps.items())
+    params = text(n["params"]) or "as defined"
+    a, b = n["hypotheses"]
+    why = (f"The two most probable explanations are close: {e(n['reason'])}." if n.get("needed") else
+           f"Asked for (the two most probable explanations are not close: {e(n['reason'])}).")
+    others = "; ".join(f"{e(d['design'])}" + (f" ({text(d['params'])})" if d["params"] else "")
+                       + f": {d['separation']:.3g}" for d in n["designs"][1:])
+    csv = f" Its command is in {e(n['csv'])} (t [s], u [V]; <code>boomfmi record --experiment FILE</code>)." \
+        if n.get("csv") else ""
+    return (f"<h2>The next experiment</h2><p>{why} Recording <b>{e(n['design'])}</b> ({params}, "
+            f"{n['duration_s']:g} s) tells <b>{e(a)}</b> from <b>{e(b)}</b> best of the designs tried: its two "
+            f"predictions differ by an expected log-likelihood ratio of {n['separation']:.3g} over the sensors' "
+            f"noise (the others: {others}).{csv}</p>{_img('next_experiment.png', embedded)}")
 
 
 def _confirmation_html(c: dict | None) -> str:
@@ -361,3 +444,6 @@ def _confirmation_html(c: dict | None) -> str:
                  f"against the reference's {c.get('reference_shrink', float('nan')):.3f}: "
                  + ("<b>they agree</b>" if c.get("agrees") else "<b>they disagree</b>"))
     return text + ".</p>"
+
+
+__all__ = ["MIN_TRAVEL", "diagnose", "OUTPUTS", "action_sentence"]

@@ -41,7 +41,7 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from ..units import UNITS
+from ..units import unit_definition, unit_problem
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[1]   # src/boomfmi
 SHIM_SOURCE = Path(__file__).with_name("status_shim.c")
@@ -119,6 +119,7 @@ def stage(fmu_dir: Path, staging: Path, portable: tuple[str, ...] = ()) -> Path:
     shutil.copytree(PACKAGE_ROOT / "model", bundle / "model",
                     ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "reference.py"))
     shutil.copy2(PACKAGE_ROOT / "fmislave.py", bundle / "fmislave.py")
+    bundle_plugins(name, bundle)
     # further boomfmi modules an FMU needs, one per line in fmus/<name>/bundle.txt
     extra = fmu_dir / "bundle.txt"
     if extra.is_file():
@@ -134,6 +135,37 @@ def stage(fmu_dir: Path, staging: Path, portable: tuple[str, ...] = ()) -> Path:
             else:
                 raise BuildError(f"{extra}: no module {module} in {PACKAGE_ROOT}")
     return staging / script.name
+
+
+def bundle_plugins(name: str, bundle: Path) -> tuple[str, ...]:
+    """Put the effect plug-ins loaded here (``model.catalogue.load_plugins``: installed
+    packages, ``$BOOMFMI_EFFECTS``) that have an effect in FMU ``name`` into its
+    ``bundle``, as ``<bundle>/effect_plugins/<module>``; the bundled catalogue loads them
+    from there, never from the host's site-packages.  Returns their module names."""
+    from ..model.catalogue import BUNDLED_PLUGINS, EFFECTS, load_plugins
+    modules = []
+    for plugin in load_plugins():
+        if not any(EFFECTS[e].fmu == name for e in plugin.effects):
+            continue
+        source = Path(plugin.source)
+        if not plugin.source or not source.exists():
+            raise BuildError(f"effect plug-in {plugin.name}: no source to bundle into the {name} FMU "
+                             f"({plugin.source or 'none known'})")
+        module = source.stem if source.is_file() else source.name
+        if module in modules:
+            raise BuildError(f"effect plug-in {plugin.name}: a second plug-in module named {module!r} in the {name} FMU")
+        modules.append(module)
+        target = bundle / BUNDLED_PLUGINS
+        target.mkdir(exist_ok=True)
+        if source.is_file():
+            shutil.copy2(source, target / f"{module}.py")
+        else:
+            shutil.copytree(source, target / module, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+    if modules:
+        (bundle / BUNDLED_PLUGINS / "__init__.py").write_text(
+            '"""The effect plug-ins this FMU was built with (boomfmi.fmubuild): its catalogue loads them."""\n'
+            f"MODULES = {tuple(modules)!r}\n")
+    return tuple(modules)
 
 
 def _format(value) -> str:
@@ -178,8 +210,9 @@ def complete_model_description(xml: bytes, variables, default_step: float = 1e-3
         else:
             type_node = node.find(var.type)
         if var.type == "Real":
-            if var.unit not in UNITS:
-                raise BuildError(f"variable {var.name}: unit {var.unit!r} is not in boomfmi.units")
+            problem = unit_problem(var.unit)
+            if problem:
+                raise BuildError(f"variable {var.name}: {problem}")
             type_node.set("unit", var.unit)
             used_units.add(var.unit)
         for bound in ("min", "max"):
@@ -192,9 +225,12 @@ def complete_model_description(xml: bytes, variables, default_step: float = 1e-3
     # UnitDefinitions come right after CoSimulation in the FMI 2.0 and 3.0 schemas.
     units_node = ET.Element("UnitDefinitions")
     for unit in sorted(used_units):
-        exponents, display = UNITS[unit]
+        exponents, factor, display = unit_definition(unit)     # from pint's SI dimensionality
         u = ET.SubElement(units_node, "Unit", name=unit)
-        ET.SubElement(u, "BaseUnit", {k: str(v) for k, v in exponents.items()})
+        base = {k: str(v) for k, v in exponents.items()}
+        if factor != 1.0:
+            base["factor"] = _format(factor)
+        ET.SubElement(u, "BaseUnit", base)
         for dname, (factor, offset) in display.items():
             attrs = {"name": dname, "factor": _format(factor)}
             if offset:
@@ -574,3 +610,11 @@ def validate(fmu: Path) -> None:
     problems = validate_fmu(str(fmu))
     if problems:
         raise BuildError(f"{fmu.name} does not validate:\n  " + "\n  ".join(problems))
+
+__all__ = [
+    "PACKAGE_ROOT", "SHIM_SOURCE", "REQUIREMENTS_CHECK", "REQUIREMENTS_NAME", "THIRD_PARTY",
+    "BuildError", "bundle_name", "requirements", "stage", "bundle_plugins", "FMI3_TYPES",
+    "complete_model_description", "SHIM_PLATFORMS", "RUNTIME_RECORD", "LIBPYTHON_ENV", "shim_compiler",
+    "compile_shim", "compile_shims", "runtime_record", "WHEEL_PLATFORMS", "WHEEL_CACHE",
+    "portable_packages", "platform_annotation", "build_fmu", "validate",
+]

@@ -417,3 +417,7 @@ def build_fmu3(fmu_dir: Path, out_dir: Path, shim: Path | None = None) -> Path:
         shutil.move(str(built), target)
     validate(target)
     return target
+
+
+__all__ = ["FMI3_NAMES", "PLATFORM", "INNER_SUFFIX", "bundle_name3", "module_name3", "stage3", "SHIM_TEMPLATE",
+           "shim_source", "compile_shim3", "build_fmu3"]

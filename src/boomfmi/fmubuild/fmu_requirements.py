@@ -114,3 +114,6 @@ def check(resources: str = RESOURCES) -> None:
                 if record["portable"] else "")
     raise ImportError(f"this FMU needs, in the Python that runs it ({where}; {portable}sys.path: "
                       f"{os.pathsep.join(sys.path)}): " + "; ".join(problems) + "." + how)
+
+
+__all__ = ["RESOURCES", "RECORD", "platform_tag", "read", "check"]

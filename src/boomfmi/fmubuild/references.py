@@ -157,3 +157,6 @@ def write_references(fmu_dir: Path, fmu_path: Path) -> Path:
         if not path.is_file() or path.read_text() != text:
             path.write_text(text)
     return ref_csv
+
+
+__all__ = ["EXCAVATOR_WINDOW", "INPUTS", "paths", "FLOAT_FORMAT", "NOISE", "reference_texts", "write_references"]

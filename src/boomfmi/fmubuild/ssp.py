@@ -299,3 +299,9 @@ def parameters_ssv(machine, ssds, fmu_dir: Path, out: Path) -> Path:
         raise BuildError(f"{where}: no component of the {set_name} set declares the machine's "
                          f"parameter(s) {', '.join(unknown)}")
     return write_ssv(out, set_name, params, description)
+
+__all__ = [
+    "referenced_sources", "component_parameter_set", "component_fmu", "fmus_of", "system_parameter_set",
+    "unconnected_inputs", "OSP_FOLDER", "without_system_connectors", "osp_ssp", "pack_ssp",
+    "PARAMETER_SETS", "LINKAGE_SUBSTEP", "machine_parameters", "parameters_ssv",
+]

@@ -1,57 +1,92 @@
-"""Identification of the model's parameters from recordings.
+"""Identification of a machine's parameters from its recordings, one joint (the boom
+rig) or four (the whole excavator).
 
-``fit`` is the sound method (all samples, least squares, intervals); ``paper`` the
-paper's method as written.  :func:`identify_recordings` reads, prepares and fits;
-:func:`write_outputs` writes ``params.json``, the SSP parameter set ``params.ssv`` that
-``boomfmi simulate --params`` takes, and a plot like the paper's Fig. 6.
+``fit`` is the sound method (all samples, least squares, intervals) on the boom's load
+and ``joints`` the same stages per joint of the excavator's linkage; ``paper`` the
+paper's method as written (the boom's).  :func:`identify_recordings` reads, prepares and
+fits the recordings of either machine (by their kind); ``outputs.write_outputs`` writes
+``params.json``, the SSP parameter set ``params.ssv`` that ``boomfmi simulate --params``
+takes, and a plot like the paper's Fig. 6.
 """
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
-from .._json import dumps, plain
-from ..compare import nrmse, recorded, rig_model, simulate_recording
-from ..outputs import OutputSet
-from ..recording import check_distinct, check_no_duplicates, check_same_rig, read_checked, recording_inputs
-from ..system.ssv import write_ssv
+from ..recording import check_no_duplicates, check_same_rig, common_kind, read_checked
 from .fit import DEADBAND_WIDEST, SPOOL_LAG, FitResult, fill_rates, identify
+from .joints import identify_joints
+from .outputs import cannot_tell, plot_fit, read_params, sidecar_warnings, summary_lines, write_outputs, write_run
 from .paper import identify_paper
-from .preprocess import CUTOFF, beyond_noise, prepare
+from .preprocess import CUTOFF, machine_for, machine_of, prepare_machine
 from ..machine import assumption
-
-#: Where each identified parameter lives in the SSP system.
-SSP_NAMES = {"K_v": "boom_load.K_v", "F_s": "boom_load.F_s", "F_d": "boom_load.F_d",
-             "F_L": "boom_load.F_L", "M": "boom_load.M", "A_max": "valve.A_max"}
 
 
 def identify_recordings(paths, method: str = "fit", with_A_max: bool = False,
-                        cutoff: float = CUTOFF, eq13: str = "printed", machine=None):
-    """Read, validate and prepare the recordings, then identify; returns
-    ``(FitResult, recordings, prepared)``.  ``machine``: a ``machine.MachineFile`` the
-    recordings are of (default: each one's sidecar, else the reference rig, which the
-    result's warnings then say)."""
+                        cutoff: float = CUTOFF, eq13: str = "printed", machine=None, progress=None):
+    """Read, validate and prepare the recordings, then identify the machine they are of
+    (their kind: the boom's or the whole excavator's; a mix is refused naming each
+    kind's files); returns ``(FitResult, recordings, prepared)``, ``prepared`` the boom's
+    prepared recordings or the excavator's linkage the identification assumed (the
+    recordings' sidecar values on ``excavator.md``'s).  ``machine``: a
+    ``machine.MachineFile`` the recordings are of (default: each one's sidecar, else
+    the reference machine, which the result's warnings then say).  The excavator is
+    identified by the fit per joint (``identify.joints``): ``method="paper"`` and
+    ``with_A_max`` are the boom's."""
     if method not in ("fit", "paper"):
         raise ValueError(f"unknown method {method!r}: 'paper' or 'fit'")
-    recs = read_checked(paths, machine=machine)
+    linkage = common_kind(paths) == "excavator"
+    if linkage:
+        _fit_per_joint(method, with_A_max)
+        (progress or (lambda text: None))(f"identifying the whole excavator per joint on {len(paths)} recording(s)")
+        recs = read_checked(paths, "excavator", "fit recording", machine=machine)
+    else:
+        recs = read_checked(paths, machine=machine)
     check_same_rig(recs)
     check_no_duplicates(recs)
-    rig = rig_model(recs[0])
-    preps = [prepare(r, cutoff, geometry=rig.geometry, P_atm=rig.P_atm) for r in recs]
+    result, recs, prepared = identify_recs(recs, method, with_A_max, cutoff, eq13)
+    assumed = assumption(recs, machine)
+    if assumed:
+        result.warnings.append(assumed)
+    if linkage:
+        return result, recs, prepared
+    result.details["recordings"] = [str(p) for p in paths]      # as given
+    _check_physical(result, paths)
+    if method == "fit":
+        _check_time_scale(prepared, machine_of(recs[0]).model, paths, result)
+    return result, recs, prepared
+
+
+def identify_recs(recs, method: str = "fit", with_A_max: bool = False, cutoff: float = CUTOFF,
+                  eq13: str = "printed", ex=None):
+    """:func:`identify_recordings` on recordings already read and checked (without its
+    checks of the result, and the assumption's warning): ``(FitResult, recs,
+    prepared)``; ``ex``: the excavator's linkage to assume (default: the recordings')."""
+    machine = machine_of(recs[0])          # one joint (the boom rig) or the linkage's four
+    if machine.n > 1:
+        _fit_per_joint(method, with_A_max)
+        ex = machine.ex if ex is None else machine_for(recs[0], ex)
+        result = identify_joints(recs, ex, cutoff)
+        result.details["recordings"] = [str(r.path) for r in recs]
+        result.details["cutoff_Hz"] = cutoff
+        result.warnings.extend(sidecar_warnings(recs))
+        return result, recs, ex
+    rig = machine.model
+    preps = [prepare_machine(r, machine, cutoff)[0] for r in recs]
     if method == "fit":
         result = identify(preps, rig.cylinder, P_atm=rig.P_atm, with_A_max=with_A_max,
                           valve=rig.valve, gas=rig.gas)
     else:
         result = identify_paper(preps, rig.cylinder, P_atm=rig.P_atm, eq13=eq13)
-    result.details["recordings"] = [str(p) for p in paths]
+    result.details["recordings"] = [str(r.path) for r in recs]
     result.details["cutoff_Hz"] = cutoff
-    assumed = assumption(recs, machine)
-    if assumed:
-        result.warnings.append(assumed)
-    _check_physical(result, paths)
-    if method == "fit":
-        _check_time_scale(preps, rig, paths, result)
     return result, recs, preps
+
+
+def _fit_per_joint(method: str, with_A_max: bool) -> None:
+    """Refuse the boom's own options for the linkage, which the fit per joint identifies."""
+    if method != "fit" or with_A_max:
+        raise ValueError("the whole excavator's recordings are identified by the fit per joint (K_v, F_s, F_d of "
+                         "each cylinder and the payload): --method paper and --a-max are the boom's")
 
 
 #: The valve's area the chambers' filling and emptying imply, over the rig's A_max,
@@ -128,71 +163,5 @@ def _check_physical(result: FitResult, paths) -> None:
                                    f"treat {k} as unknown in its precision")
 
 
-def plot_fit(values: dict, recs, path) -> None:
-    """Recorded and simulated x, p_a, p_b over each fit recording (the paper's Fig. 6):
-    one column per recording, in one figure."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    recs = list(recs) if isinstance(recs, (list, tuple)) else [recs]
-    fig, grid = plt.subplots(3, len(recs), sharex="col", figsize=(9 * len(recs), 7), squeeze=False)
-    for k, rec in enumerate(recs):
-        axes = grid[:, k]
-        rig = rig_model(rec)
-        sim = simulate_recording(values, rec, rig=rig)
-        t = rec.data["t"].to_numpy()
-        x_rec = recorded(rec, rig)["x"]
-        axes[0].plot(t, 1e3 * x_rec, lw=0.8, label="recorded")
-        axes[0].plot(t, 1e3 * sim["x"], lw=1.0, label="model, identified parameters")
-        axes[0].set_ylabel("x [mm]")
-        for ax, ch in ((axes[1], "p_a"), (axes[2], "p_b")):
-            ax.plot(t, rec.data[ch] / 1e5, lw=0.8)
-            ax.plot(t, sim[ch] / 1e5, lw=1.0)
-            ax.set_ylabel(f"{ch} [bar gauge]")
-        axes[2].set_xlabel("t [s]")
-        axes[0].legend(loc="upper left")
-        axes[0].set_title(f"{Path(rec.path).name}: recorded and simulated response")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110, format="png")
-    plt.close(fig)
-
-
-def write_outputs(result: FitResult, recs, out, holdout=()) -> dict:
-    """Write ``out`` (params.json), ``params.ssv`` and ``params.png`` beside it, as one set
-    (:class:`OutputSet`: all or none; a file this run does not write is removed, so no
-    earlier run's passes for this one's).  ``doc["written"]`` lists the files."""
-    out = Path(out)
-    holds = read_checked(holdout, role="holdout")     # the same checks as the fit recordings'
-    for h in holds:
-        check_distinct(recs, h)
-    values = result.values()
-    doc = {"method": result.method,
-           "params": {k: {"value": e.value, "ci95": list(e.ci95), "unit": e.unit}
-                      for k, e in result.params.items()},
-           "warnings": result.warnings,
-           "details": plain(result.details)}
-    finite = {k: v for k, v in values.items() if math.isfinite(v)}
-    doc["nrmse_fit"] = {str(r.path): nrmse(simulate_recording(finite, r), r) for r in recs} if _usable(finite) else {}
-    for hr in holds:
-        err = doc.setdefault("nrmse_holdout", {})[str(hr.path)] = nrmse(simulate_recording(finite, hr), hr)
-        doc.setdefault("holdout_gap", {})[str(hr.path)] = beyond_noise(err, hr)
-    physical = not any(w.startswith("not physical") for w in result.warnings)
-    names = (out.name, out.with_suffix(".ssv").name, out.with_suffix(".png").name)
-    with OutputSet(out.parent, stale=names,
-                   inputs=recording_inputs([*(r.path for r in recs), *(h.path for h in holds)])) as files:
-        if physical:
-            write_ssv(files.path(names[1]), "identified",
-                      {SSP_NAMES[k]: (v, result.params[k].unit) for k, v in finite.items()},
-                      f"identified by boomfmi ({result.method}) from " + ", ".join(str(r.path) for r in recs))
-        if physical and _usable(finite):
-            plot_fit(finite, recs, files.path(names[2]))
-        doc["written"] = [str(p) for p in [out, *files.written()]]
-        files.path(names[0]).write_text(dumps(doc, indent=2))
-    return doc
-
-
-def _usable(values: dict) -> bool:
-    return all(k in values and values[k] > 0 for k in ("K_v", "F_d", "M")) and "F_L" in values
-
-
-__all__ = ["identify_recordings", "write_outputs", "FitResult"]
+__all__ = ["identify_recordings", "identify_recs", "write_outputs", "summary_lines", "cannot_tell", "plot_fit",
+           "read_params", "write_run", "FitResult"]

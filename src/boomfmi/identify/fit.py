@@ -55,7 +55,7 @@ from ..physics import reference_rig
 from .preprocess import Prepared, lowpass
 
 PARAMS = ("K_v", "F_s", "F_d", "F_L", "M")
-UNITS = {"K_v": "N.s/m", "F_s": "N", "F_d": "N", "F_L": "N", "M": "kg", "A_max": "m2",
+PARAMETER_UNITS = {"K_v": "N.s/m", "F_s": "N", "F_d": "N", "F_L": "N", "M": "kg", "A_max": "m2",
          "c_sum": "N/Pa", "c_max": "N/Pa", "c_diff": "N/Pa"}
 #: pressure_friction's coefficient for each seal-pressure law (``physics.effects.seal_pressure``)
 PRESSURE_COEFFICIENT = {"sum": "c_sum", "max": "c_max", "diff": "c_diff"}
@@ -100,7 +100,7 @@ def _widened(name: str, value: float, lo: float, hi: float) -> Estimate:
     floor = SYSTEMATIC.get(name, 0.0) * abs(value)
     below = math.hypot(value - lo, floor)
     above = math.hypot(hi - value, floor)
-    return Estimate(float(value), (float(value - below), float(value + above)), UNITS[name])
+    return Estimate(float(value), (float(value - below), float(value + above)), PARAMETER_UNITS[name])
 
 
 def _dilate(mask: np.ndarray, n: int) -> np.ndarray:
@@ -255,6 +255,59 @@ def equation_error(motions: list["Motion"], n_boot: int = 200, block: float = 0.
     residual = y - X @ theta
     return est, {"samples": int(n), "condition_number": cond,
                  "rms_residual_N": float(np.sqrt(np.mean(residual**2)))}
+
+
+def _load_along(load_at, load: ph.Load, v: np.ndarray, p_a: np.ndarray, p_b: np.ndarray) -> ph.Load:
+    """``load_at(load, v, p_a, p_b)`` at every sample, each field a float or an array of
+    v's shape: called once on the arrays, else sample by sample (a form on floats only)."""
+    try:
+        out = load_at(load, v, p_a, p_b)
+        if all(np.ndim(f) == 0 or np.shape(f) == v.shape for f in out):
+            return ph.Load(*(np.asarray(f, float) if np.ndim(f) else float(f) for f in out))
+    except (TypeError, ValueError):
+        pass
+    each = [load_at(load, float(a), float(b), float(c)) for a, b, c in zip(v, p_a, p_b)]
+    return ph.Load(*(np.array(f, float) for f in zip(*each)))
+
+
+def load_with_effect(motions: list["Motion"], start: dict, load_at, cutoff: float = EE_CUTOFF) -> dict:
+    """Stage 1 with a friction-stage effect in the load, for an effect no linear column
+    holds: M, K_v, F_d, F_L by nonlinear least squares of :func:`equation_rows`' equation
+    error, the load at each sample ``load_at(load, v, p_a, p_b)`` (the effect's form at
+    the smoothed speed and the recorded absolute pressures: arrays, or floats sample by
+    sample), from ``start`` (the effect-free fit; F_s keeps its excess over F_d there).
+    A field the effect makes vary multiplies its filtered column (M, K_v) or its
+    unfiltered term before the filter (F_d, F_L), so that a constant one gives
+    :func:`equation_rows`' row exactly.  Returns ``start`` with the four (and F_s) anew."""
+    names = ("M", "K_v", "F_d", "F_L")
+    excess = max(start.get("F_s", start["F_d"]) - start["F_d"], 0.0)
+    rows = []
+    for r in motions:
+        p, modes = r.p, r.modes
+        G = lambda y, fs=p.fs: lowpass(y, fs, cutoff)
+        vg = np.gradient(G(p.x_raw), p.t)
+        _, y, use = equation_rows(r, cutoff)
+        rows.append((G, np.gradient(vg, p.t), vg, modes.direction * np.cos(p.phi),
+                     modes.sliding * np.sin(p.phi), y, use, modes.v, p.p_a_raw, p.p_b_raw))
+    if sum(int(u.sum()) for *_, u, _v, _a, _b in rows) < 50:
+        raise ValueError("too few samples in motion to identify the load: the recordings hold almost no motion")
+    z0 = np.array([float(start[k]) for k in names])
+    scale = np.where(np.abs(z0) > 0.0, np.abs(z0), 1.0)
+    spread = float(np.std(np.concatenate([y[u] for *_, y, u, _v, _a, _b in rows]))) or 1.0
+
+    def residuals(z):
+        M, K_v, F_d, F_L = z * scale
+        load = ph.Load(K_v=K_v, F_s=F_d + excess, F_d=F_d, F_L=F_L, M=M)
+        out = []
+        for G, ag, vg, friction, sin, y, use, v, pa, pb in rows:
+            ld = _load_along(load_at, load, v, pa, pb)
+            smooth = lambda f: G(f) if np.ndim(f) else f
+            pred = smooth(ld.M) * ag + smooth(ld.K_v) * vg + G(ld.F_d * friction) + G(ld.F_L * sin)
+            out.append((pred - y)[use] / spread)
+        return np.concatenate(out)
+    res = least_squares(residuals, z0 / scale, method="lm")
+    found = dict(zip(names, (float(v) for v in res.x * scale)))
+    return {**start, **found, "F_s": found["F_d"] + excess}
 
 
 def runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -868,3 +921,13 @@ def identify(preps: list[Prepared], cyl: ph.Cylinder = ph.Cylinder(), P_atm: flo
                             f"[{e.ci95[0]:.4g}, {e.ci95[1]:.4g}] {e.unit} is wider than half its value")
     ordered = {k: est[k] for k in (*PARAMS, "A_max", *PRESSURE_COEFFICIENT.values()) if k in est}
     return FitResult("fit", ordered, warnings, details)
+
+__all__ = [
+    "PARAMS", "PARAMETER_UNITS", "PRESSURE_COEFFICIENT", "TELLS_WIDTH", "SYSTEMATIC", "Estimate", "FitResult",
+    "resolution", "MODE_CUTOFF", "Modes", "motion_modes", "EE_CUTOFF", "REACH", "correlation_samples",
+    "equation_rows", "equation_error", "load_with_effect", "runs", "VE_CUTOFF", "Motion", "motion",
+    "velocity_error", "REST_BEFORE", "START_CUTOFF", "SETTLE", "START_BACK", "START_AFTER", "STOP_ZONE",
+    "GRID_TOP", "MODEL_SPREAD", "TEMPER", "OUTLIER", "STRAY", "IDENTIFIED_WIDTH", "EDGE_DROP",
+    "static_friction", "upper_edge", "start_spread", "breakaways", "simulate_load", "fit_A_max",
+    "DEADBAND_WIDEST", "SPOOL_LAG", "FillRate", "fill_rates", "identify",
+]

@@ -28,7 +28,7 @@ import numpy as np
 
 from .. import physics as ph
 from ..physics import reference_rig
-from .fit import Estimate, FitResult, UNITS, breakaways
+from .fit import PARAMETER_UNITS, Estimate, FitResult, breakaways
 from .preprocess import Prepared
 
 NAN = (math.nan, math.nan)
@@ -124,7 +124,7 @@ def identify_paper(preps: list[Prepared], cyl: ph.Cylinder = ph.Cylinder(), P_at
             warnings.append(f"Eq. 16 gives a non-physical mass M = {M:.3g} kg")
     details["condition_number"] = cond
     values = {"K_v": K_v, "F_s": F_s, "F_d": F_d, "F_L": F_L, "M": M}
-    params = {k: Estimate(float(v), NAN, UNITS[k]) for k, v in values.items()}
+    params = {k: Estimate(float(v), NAN, PARAMETER_UNITS[k]) for k, v in values.items()}
     return FitResult("paper", params, warnings, details)
 
 
@@ -134,3 +134,6 @@ def solve_printed_eq17():
     A = np.array([[0.0784, 0.6169, 0.0517], [0.0783, 0.5853, 0.0269], [0.0739, 0.5846, 0.0250]])
     b = np.array([297.2217, 290.3454, 289.2136])
     return np.linalg.solve(A, b), float(np.linalg.cond(A)), A, b
+
+
+__all__ = ["NAN", "onset", "identify_paper", "solve_printed_eq17"]

@@ -14,7 +14,8 @@ import numpy as np
 from scipy.signal import butter, filtfilt, lfilter
 
 from .. import physics as ph
-from ..recording import Recording
+from ..physics import linkage as exc
+from ..recording import EXCAVATOR_RIG_KEYS, Recording
 
 #: Default cut-off of the low-pass filter [Hz] (the paper does not give its own).
 CUTOFF = 25.0
@@ -100,3 +101,127 @@ def noise_floor(rec) -> dict:
     m = recorded(rec)
     fs = 1.0 / float(np.median(np.diff(rec.data["t"].to_numpy(float))))
     return {c: float(np.std(m[c] - lowpass(m[c], fs, 50.0)) / max(float(np.ptp(m[c])), 1e-12)) for c in CHANNELS}
+
+
+# --- a machine of joints: the data of each joint (issue 32: one pipeline for one joint or four)
+
+@dataclass
+class JointData:
+    """One recording's joint of the linkage, ready for every stage of
+    ``identify.joints``."""
+    p: Prepared                #: the joint as an equivalent single cylinder (unit areas; F_net as p_a - P_atm)
+    modes: object              #: fit.Modes of its position
+    F_p: np.ndarray            #: pneumatic force [N], from the raw pressures
+    scale: np.ndarray          #: Eq. 9's factor (cos(phi) for the boom, 1 otherwise)
+    D0: np.ndarray             #: M_x(0) x'' + bias(0) - lam J^T f_tip [N] (25 Hz signals)
+    dD: np.ndarray             #: the payload's share per kg [N/kg]
+    own0: np.ndarray           #: the joint's own inertia M_x[i,i](0) x''_i [N]
+    unsure: np.ndarray         #: [N] the other joints' motion's share of D0 (D0 - own0 - gravity, no payload):
+                               #: known only as well as their filtered accelerations and speeds
+    down: np.ndarray           #: its payload share per kg [N/kg]
+    Mii0: np.ndarray           #: M_x[i, i] at no payload [kg]
+    dMii: np.ndarray           #: per kg of payload
+    L: float
+
+
+def machine_for(rec, ex: exc.Excavator | None = None) -> exc.Excavator:
+    """The linkage of an excavator recording: ``ex`` (default: ``excavator.md``'s
+    machine) with the recording's sidecar values (a machine file's, ``machine.py``:
+    ``<field>_<joint>`` ..., P_atm)."""
+    ex = ex or exc.Excavator()
+    own = {k: float(v) for k, v in rec.rig.items() if k in EXCAVATOR_RIG_KEYS}
+    return exc.excavator_from_values(own, ex) if own else ex
+
+
+def machine_of(rec):
+    """The machine (``model.machine.Machine``) a recording is of, by its kind: the
+    boom rig of its sidecar (``compare.rig_model``: one joint) or the whole excavator
+    of its sidecar (:func:`machine_for`: four)."""
+    from ..compare import rig_model
+    from ..model.machine import boom_machine, excavator_machine
+    from ..recording import recording_kind
+    if recording_kind(rec) == "excavator":
+        return excavator_machine(machine_for(rec))
+    return boom_machine(rig_model(rec))
+
+
+def _frame(rec):
+    """The recording's data as a DataFrame (a Recording or a DataFrame)."""
+    return rec.data if hasattr(rec, "data") else rec
+
+
+def prepare_machine(rec, machine=None, cutoff: float = CUTOFF) -> list:
+    """A recording ready for identification, one entry per joint of ``machine`` (a
+    ``model.machine.Machine``, or the linkage ``physics.linkage.Excavator``; default
+    ``excavator.md``'s): the one-joint machine (the boom rig) is the boom's load whole
+    (Eq. 8 to 12), its entry :func:`prepare` at its geometry and P_atm; each joint of
+    the linkage a :class:`JointData` (``Recording`` or DataFrame with the excavator's
+    columns, pressures gauge), the linkage's known terms evaluated at every sample."""
+    if machine is not None and getattr(machine, "model", None) is not None:
+        return [prepare(rec, cutoff, geometry=machine.model.geometry, P_atm=machine.model.P_atm)]
+    ex = getattr(machine, "ex", machine) if machine is not None else exc.Excavator()
+    return _prepare_linkage(rec, ex, cutoff)
+
+
+def _prepare_linkage(rec, ex: exc.Excavator, cutoff: float) -> list[JointData]:
+    """:func:`prepare_machine` on the linkage: one :class:`JointData` per joint of
+    ``physics.linkage.JOINTS``."""
+    from .fit import motion_modes          # fit builds on this module
+    JOINTS = exc.JOINTS
+    d = _frame(rec)
+    P_atm = float(rec.P_atm) if hasattr(rec, "P_atm") else ex.P_atm
+    t = d["t"].to_numpy(float)
+    fs = 1.0 / float(np.median(np.diff(t)))
+    q_raw = np.column_stack([d[f"angle_{j}"].to_numpy(float) for j in JOINTS])
+    x_raw = exc.pistons_from_angles(q_raw, ex)
+    x = np.column_stack([lowpass(x_raw[:, i], fs, cutoff) for i in range(4)])
+    v = np.gradient(x, t, axis=0)
+    a = np.gradient(v, t, axis=0)
+    p_a = np.column_stack([d[f"p_a_{j}"].to_numpy(float) for j in JOINTS]) + P_atm
+    p_b = np.column_stack([d[f"p_b_{j}"].to_numpy(float) for j in JOINTS]) + P_atm
+    F_p = exc.cylinder_forces(p_a, p_b, ex)
+    f_tip = None
+    if all(c in d for c in ("f_tip_x", "f_tip_y", "f_tip_z")):
+        f_tip = d[["f_tip_x", "f_tip_y", "f_tip_z"]].to_numpy(float)
+        if not np.any(f_tip):
+            f_tip = None
+    n = len(t)
+    xc = np.clip(x, 0.0, ex.strokes)
+    D = np.empty((2, n, 4))
+    own = np.empty((2, n, 4))
+    Mii = np.empty((2, n, 4))
+    unsure = np.empty((n, 4))
+    zero = np.zeros(4)
+    for k in range(n):
+        for m in (0, 1):
+            Mx, bias, lam = exc.piston_dynamics(xc[k], v[k], float(m), ex)
+            D[m, k] = Mx @ a[k] + bias
+            own[m, k] = np.diag(Mx) * a[k]
+            Mii[m, k] = np.diag(Mx)
+        unsure[k] = np.abs(D[0, k] - own[0, k] - exc.piston_dynamics(xc[k], zero, 0.0, ex)[1])
+        if f_tip is not None:
+            q = exc.joint_angles(xc[k], ex)
+            tau = exc.tip_torques(q, f_tip[k], ex) / exc.lever_arms(xc[k], ex)
+            D[0, k] -= tau
+            D[1, k] -= tau
+    scale = exc.friction_scale(xc, ex)
+    phi_boom = ph.phi_from_x(xc[:, 1], ex.geometry)
+    out = []
+    for i, (j, act) in enumerate(zip(JOINTS, ex.actuators)):
+        F_net = F_p[:, i] - (D[0, :, i] - own[0, :, i])     # everything on it but its own inertia and friction
+        phi = phi_boom if j == "boom" else np.zeros(n)
+        p = Prepared(t=t, u=d[f"u_{j}"].to_numpy(float), p_a=lowpass(F_net, fs, cutoff) + P_atm,
+                     p_b=np.full(n, P_atm), x=x[:, i], v=v[:, i], a=a[:, i], phi=phi, x_raw=x_raw[:, i],
+                     p_a_raw=F_net + P_atm, p_b_raw=np.full(n, P_atm), fs=fs, cutoff=cutoff,
+                     source=f"{getattr(rec, 'path', '')}:{j}")
+        out.append(JointData(p=p, modes=motion_modes(p, act.stroke), F_p=F_p[:, i], scale=scale[:, i],
+                             D0=D[0, :, i], dD=D[1, :, i] - D[0, :, i], own0=own[0, :, i],
+                             unsure=unsure[:, i],
+                             down=own[1, :, i] - own[0, :, i], Mii0=Mii[0, :, i], dMii=Mii[1, :, i] - Mii[0, :, i],
+                             L=act.stroke))
+    return out
+
+__all__ = [
+    "CUTOFF", "lowpass", "Prepared", "prepare", "NOISE_FACTOR", "ABS_FLOOR", "beyond_noise",
+    "noise_floor", "JointData", "machine_for", "machine_of", "prepare_machine",
+]

@@ -151,3 +151,6 @@ class RigClient:
 
     def close(self) -> None:
         self.sock.close()
+
+
+__all__ = ["parse_address", "wait_until", "RigClient"]

@@ -368,3 +368,12 @@ class SequenceGuard:
             return False
         self.last = seq
         return True
+
+
+__all__ = ["MAGIC", "VERSION", "PAYLOAD_SIZE", "MAC_SIZE", "DATAGRAM_SIZE", "COMMAND", "SAMPLE", "STATUS",
+           "EXCAVATOR_COMMAND", "EXCAVATOR_SAMPLE", "CHALLENGE", "EXCAVATOR_PAYLOAD_SIZE", "EXCAVATOR_DATAGRAM_SIZE",
+           "FAILSAFE", "LOCKSTEP", "KEY_ENV", "MIN_KEY_BYTES", "MAX_SESSIONS", "SESSION_IDLE", "OPEN_WINDOW",
+           "LinkError", "Malformed", "BadMac", "Command", "StatusRequest", "Challenge", "SampleDatagram",
+           "ExcavatorCommand", "ExcavatorSampleDatagram", "load_key", "mac", "verifies", "encode_command",
+           "encode_status", "encode_challenge", "encode_sample", "encode_excavator_command", "encode_excavator_sample",
+           "decode", "OpenGuard", "SequenceGuard"]

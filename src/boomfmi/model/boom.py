@@ -31,7 +31,7 @@ from .. import physics as ph
 from ..physics import effects as fx
 from ..physics.lag import delayed
 from ..physics import reference_rig
-from .catalogue import EFFECTS
+from .catalogue import EFFECTS, INTEGRATORS, check_entry
 
 
 @dataclass
@@ -58,8 +58,19 @@ class Model:
         ph.check_cylinder(self.cylinder)
         ph.check_load(self.load)
         ph.check_geometry(self.geometry, self.cylinder.L)
-        fx.check_cushion_port(_param(self.effects, "end_cushioning", "V_p"), self.cylinder,
-                              "effects.end_cushioning.V_p")
+        check_caps(self.effects, self.cylinder)
+
+
+def check_caps(effects: dict, cylinder: ph.Cylinder, where: str = "effects") -> None:
+    """Every effect parameter with a ``cap`` (``Parameter.cap``) within it on ``cylinder``:
+    a share of the dead volumes smaller than they are (``physics.effects.check_cushion_port``)."""
+    for name, params in effects.items():
+        for q in EFFECTS[name].parameters:
+            if not q.cap:
+                continue
+            if q.cap != "dead_volume":
+                raise ph.ParameterError(f"{where}.{name}.{q.name}", q.cap, "a cap the model does not know")
+            fx.check_cushion_port(float(params.get(q.name, 0.0)), cylinder, f"{where}.{name}.{q.name}")
 
 
 def check_effects(effects: dict) -> None:
@@ -67,6 +78,7 @@ def check_effects(effects: dict) -> None:
     for name, params in effects.items():
         if name not in EFFECTS:
             raise ph.ParameterError("effects", name, f"not an effect of effects.md ({', '.join(EFFECTS)})")
+        check_integrator(EFFECTS[name])
         known = tuple(p.name for p in EFFECTS[name].parameters)
         unknown = set(params) - set(known)
         if unknown:
@@ -82,8 +94,41 @@ def check_effects(effects: dict) -> None:
                 raise ph.ParameterError(f"effects.{name}.{k}", v, f"must be 0 (off) or at least {q.on_min:g}")
 
 
-def _param(effects: dict, name: str, parameter: str) -> float:
-    return float(effects.get(name, {}).get(parameter, 0.0))
+def check_integrator(effect) -> None:
+    """Raise :class:`physics.ParameterError` naming ``effect`` where the model cannot step
+    it (``catalogue.check_entry``): a stage it does not have, a stateful stage's effect
+    without an integrator of the model (``INTEGRATORS``) of that stage, a stateless
+    stage's without its function."""
+    try:
+        check_entry(effect)
+    except ValueError as e:
+        raise ph.ParameterError(f"effects.{effect.name}", effect.stage, str(e)) from None
+
+
+def integrated(effects: dict, integrator: str) -> dict:
+    """The parameters of the effect of ``effects`` (``{name: params}``) that the model's
+    ``integrator`` steps (``Effect.integrator``; {} without one)."""
+    if integrator not in INTEGRATORS:
+        raise ValueError(f"{integrator!r} is not an integrator of the model ({', '.join(INTEGRATORS)})")
+    out = {}
+    for name, params in effects.items():
+        if EFFECTS[name].integrator == integrator:
+            out.update(params)
+    return out
+
+
+def measurement_lag(effects: dict) -> tuple[float, float]:
+    """The sensors' ``(tau, delay)`` [s] from the measurement stage's effects of ``effects``
+    (0, 0 without); ParameterError for a measurement effect the model cannot step."""
+    for name in effects:
+        if EFFECTS[name].stage == "measurement":
+            check_integrator(EFFECTS[name])
+    q = integrated(effects, "sensor_path")
+    return float(q.get("tau", 0.0)), float(q.get("delay", 0.0))
+
+
+def _param(effects: dict, integrator: str, parameter: str) -> float:
+    return float(integrated(effects, integrator).get(parameter, 0.0))
 
 
 class Boom:
@@ -98,22 +143,23 @@ class Boom:
         self.valve, self.gas, self.cylinder = model.valve, model.gas, model.cylinder
         self.geometry, self.load, self.P_atm = model.geometry, model.load, model.P_atm
         on = {n: q for n, q in model.effects.items() if EFFECTS[n].is_on(q)}
+        for n in on:
+            check_integrator(EFFECTS[n])
         stage = lambda s: tuple((EFFECTS[n].apply, q) for n, q in on.items() if EFFECTS[n].stage == s)
         self.command_effects = stage("command")
         self.inflow_effects = stage("port") + stage("seal")   # port effects act on the valve's flow first
         self.friction_effects = stage("friction")
-        self.tau_spool = _param(on, "valve_dynamics", "tau")
-        self.h_wall = _param(on, "heat_transfer", "h")
-        n_poly = _param(on, "heat_transfer", "n")
+        self.tau_spool = _param(on, "spool_lag", "tau")
+        self.h_wall = _param(on, "wall_heat", "h")
+        n_poly = _param(on, "wall_heat", "n")
         #: the gas as the chambers' process sees it: k replaced by the polytropic
         #: exponent where heat_transfer's second law is on (the orifices keep k)
         self.chamber_gas = self.gas._replace(k=n_poly) if n_poly > 0.0 else self.gas
-        self.tau_sensor = _param(on, "sensor_lag", "tau")
-        self.delay_sensor = _param(on, "sensor_lag", "delay")
+        self.tau_sensor, self.delay_sensor = measurement_lag(on)
         self.bore = math.sqrt(4.0 * self.cylinder.A_a / math.pi)   #: for the wall's area [m]
-        self.l_cushion = _param(on, "end_cushioning", "length")
+        self.l_cushion = _param(on, "cushion_port", "length")
         #: end_cushioning's port volume [m^3], cut off the chamber within the cushion (0: none)
-        self.V_port = _param(on, "end_cushioning", "V_p") if self.l_cushion > 0.0 else 0.0
+        self.V_port = _param(on, "cushion_port", "V_p") if self.l_cushion > 0.0 else 0.0
 
     # ------------------------------------------------------------------ valve
     def spool_step(self, y: float, u: float, dt: float) -> float:
@@ -258,7 +304,7 @@ class Boom:
         """The load's parameters at speed ``v`` [m/s] and pressures [Pa] (``friction``
         stage; without such an effect, ``load``)."""
         for apply, q in self.friction_effects:
-            load = apply(load, v, p_a, p_b, q, self.model)
+            load = apply(load, v, p_a, p_b, q, self)
         return load
 
     def step_load(self, x: float, v: float, dt: float, p_a: float, p_b: float, f_ext: float,
@@ -299,3 +345,8 @@ def measure(y: np.ndarray, t: np.ndarray, tau: float = 0.0, delay: float = 0.0) 
     if delay > 0.0:
         y = delayed(y, t, delay)
     return lagged(y, t, tau) if tau > 0.0 else y
+
+__all__ = [
+    "Model", "check_caps", "check_effects", "check_integrator", "integrated", "measurement_lag", "Boom",
+    "lagged", "measure",
+]

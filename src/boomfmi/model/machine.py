@@ -22,11 +22,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .. import physics as ph
-from ..physics import effects as fx
 from ..physics import reference_rig
 from ..physics.linkage import JOINTS, Excavator, excavator_parameters
 from ..physics.params import channel
-from .boom import Boom, Model, check_effects
+from .boom import Boom, Model, check_caps, check_effects
 from .catalogue import EFFECTS, fmu_variable
 
 
@@ -36,15 +35,13 @@ def holding_pressures(ex: Excavator, x0, p_b0: float | None = None, payload: flo
     and the atmosphere) in every rod side, and the cap side's pressure whose cylinder
     force equals the gravity load reflected to the piston (``lam G``, the linkage's
     bias at rest)."""
-    from ..physics.linkage import _fast_posture, _prepared, _rigid_terms
+    from ..physics.linkage import holding_forces
     if p_b0 is None:
         p_b0 = 0.5 * (reference_rig.P_s + ex.P_atm)
-    P = _prepared(ex, float(payload))
-    q, lam, _, _ = _fast_posture([float(t) for t in x0], P)
-    _, _, G = _rigid_terms(q, [0.0] * 4, P)
+    forces = holding_forces(x0, payload, ex)
     p_a = []
     for j, a in enumerate(ex.actuators):
-        force = lam[j] * G[j]
+        force = forces[j]
         p_a.append((force + p_b0 * a.A_b + ex.P_atm * (a.A_a - a.A_b)) / a.A_a)
     return np.array(p_a), np.full(4, float(p_b0))
 
@@ -210,8 +207,7 @@ def _check_effects(effects, cylinders: dict, what: str) -> None:
         try:
             check_effects(eff)
             if cylinders[joint] is not None:
-                V_p = float(eff.get("end_cushioning", {}).get("V_p", 0.0))
-                fx.check_cushion_port(V_p, cylinders[joint], "effects.end_cushioning.V_p")
+                check_caps(eff, cylinders[joint])
         except ph.ParameterError as e:
             reason = str(e).split(" is invalid: ", 1)[-1]
             raise ph.ParameterError(e.name.replace("effects", f"effects.{joint}", 1), e.value, reason) from None
@@ -251,3 +247,8 @@ def friction_hook(boom: Boom, load: ph.Load):
         ld = boom.load_at(load, v, p_a, p_b)
         return ld.K_v, ld.F_s, ld.F_d
     return hook
+
+__all__ = [
+    "holding_pressures", "Joint", "Machine", "ExcavatorMachine", "boom_machine", "excavator_machine",
+    "check_joint_effects", "joint_fmu_variable", "friction_hook",
+]

@@ -388,3 +388,7 @@ def simulate(machine: Machine, command: Callable[[float], dict], stop_time: floa
         machine.check()
         return simulate_reference(machine.joint_model("boom"), command, stop_time, **options)
     return simulate_linkage(command, stop_time, machine, **options)
+
+
+__all__ = ["Layout", "rhs", "StickSlip", "Resampler", "simulate_reference", "simulate_linkage",
+           "simulate_excavator_reference", "simulate"]

@@ -91,3 +91,6 @@ def chamber_pressure_step(P_0: float, V_0: float, V_1: float, mdot: float, dt: f
         phi1 = math.expm1(z) / z if abs(z) > 1e-8 else 1.0 + 0.5 * z
         y = e * y + h * phi1 * kRT * V ** (k - 1.0) * source
     return y / V_1**k
+
+
+__all__ = ["chamber_volumes", "pressure_rates", "chamber_inflows", "chamber_pressure_step"]

@@ -277,3 +277,12 @@ def sensor_lag_step(measured: float, true: float, dt: float, tau: float) -> floa
     """A sensor channel after ``dt`` [s]: first-order towards the true value with time
     constant ``tau`` [s]; ``tau <= 0`` reads the true value."""
     return first_order_step(measured, true, dt, tau)
+
+__all__ = [
+    "spool_lag_step", "deadband_command", "thermal_relaxation_step", "thermal_relaxation_rate",
+    "outflow_temperature_rate", "chamber_wall_area", "thermal_time_constant", "leakage_flow",
+    "leakage_orifice_flow", "leakage_orifice_slopes", "stribeck_weight", "stribeck_level",
+    "stribeck_load", "seal_pressure", "pressure_friction_load", "cushion_engagement",
+    "cushion_engagement_slope", "check_cushion_port", "cushion_port_cut", "cushion_outflow",
+    "cushion_outflow_slope", "sensor_lag_step",
+]

@@ -61,3 +61,6 @@ def pressure_level(p, level_0, c):
     ``level_0`` [N] at atmospheric pressure, ``c`` [N/Pa] (an effective area: the seal's
     contact band times its friction coefficient)."""
     return level_0 + c * p
+
+
+__all__ = ["measured_friction", "directional", "seal_friction", "pressure_level"]

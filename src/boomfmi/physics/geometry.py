@@ -86,3 +86,6 @@ def linkage_points(alpha, geom: Geometry = Geometry()):
     R = (b * xp.cos(alpha - beta), b * xp.sin(alpha - beta))
     return C, R
 
+
+
+__all__ = ["cylinder_length", "phi_from_x", "alpha_from_x", "x_from_alpha", "check_geometry", "linkage_points"]

@@ -60,3 +60,6 @@ def delayed(y, t, delay: float):
     if delay <= 0.0:
         return y
     return np.interp(np.asarray(t, float) - delay, t, y)
+
+
+__all__ = ["first_order_step", "DelayLine", "delayed"]

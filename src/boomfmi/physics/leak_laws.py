@@ -60,3 +60,6 @@ def chamber_pressure(m, T, V: float, R: float):
 def air_mass(p, T, V: float, R: float):
     """Air mass [kg] at absolute pressure ``p`` [Pa] and ``T`` [K] in ``V`` [m^3]."""
     return p * V / (R * T)
+
+
+__all__ = ["leak_flow", "leakdown_rates", "chamber_pressure", "air_mass"]

@@ -663,6 +663,16 @@ def angles_and_tip(x, ex: Excavator = _DEFAULT):
     return q, (r * math.cos(q[0]), r * math.sin(q[0]), z)
 
 
+def holding_forces(x, payload: float = 0.0, ex: Excavator = _DEFAULT) -> list:
+    """The gravity load reflected to each piston at piston positions ``x`` [m] and rest,
+    ``lam G`` [N] (4 plain floats, positive: the cylinder must extend to hold): the force
+    each cylinder exerts to hold its joint still, on the stepping's prepared constants."""
+    P = _prepared(ex, float(payload))
+    q, lam, _, _ = _fast_posture([float(t) for t in x], P)
+    G = _rigid_terms(q, [0.0] * 4, P)[2]
+    return [lam[j] * G[j] for j in range(4)]
+
+
 def _fast_terms(q, qd, ex: Excavator, payload: float):
     """M (4x4), C(q, q') q' and G at one posture, with plain floats (the stepping's path,
     :func:`_rigid_terms`).  Returns nested lists (M) and lists (C q', G)."""
@@ -1036,3 +1046,11 @@ def excavator_from_values(values: dict, base: Excavator = _DEFAULT) -> Excavator
     ex = replace(base, **acts, **links, **own)
     check_excavator(ex)
     return ex
+
+
+__all__ = ["JOINTS", "LINKS", "G_EARTH", "Link", "Actuator", "Excavator", "excavator_parameters", "check_excavator",
+           "joint_angles", "pistons_from_angles", "joint_limits", "lever_arms", "friction_scale", "forward_kinematics",
+           "tip_position", "angles_and_tip", "holding_forces", "mass_matrix", "mass_matrix_derivative", "coriolis",
+           "gravity", "potential_energy", "kinetic_energy", "tip_jacobian", "cylinder_forces", "cylinder_torques",
+           "tip_torques", "piston_dynamics", "piston_accelerations", "lumped_boom_load", "advance_linkage",
+           "ACTUATOR_FIELDS", "LINK_FIELDS", "MACHINE_FIELDS", "excavator_value_names", "excavator_from_values"]

@@ -190,3 +190,7 @@ def end_stops(x: float, v: float, L: float):
     if x >= L:
         return L, (0.0 if v > 0.0 else v)
     return x, v
+
+
+__all__ = ["piston_force", "drive_force", "friction_force", "acceleration", "sliding_acceleration", "sliding_velocity",
+           "slide_or_stick", "advance_load", "end_stops"]

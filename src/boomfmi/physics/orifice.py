@@ -123,3 +123,7 @@ def signed_mass_flow_slope(A, P_1, P_2, gas: Gas = Gas()):
     slope_d = mass_flow_slope(A, P_u, P_d, gas)          # d m / d P_d
     slope_u = m / P_u - slope_d * P_d / P_u               # d m / d P_u (m is homogeneous of degree 1)
     return xp.where(forward, slope_d, -slope_u)
+
+
+__all__ = ["critical_pressure_ratio", "R_LAMINAR", "mass_flow", "mass_flow_slope", "flow_at", "signed_mass_flow",
+           "signed_mass_flow_slope"]

@@ -106,3 +106,7 @@ def channel(quantity: str, joint: str, n: int) -> str:
     if n == 1:
         return "alpha" if quantity == "angle" else quantity
     return f"{quantity}_{joint}"
+
+
+__all__ = ["L_MAX", "Gas", "Valve", "Cylinder", "Geometry", "Load", "check_gas", "check_valve", "check_cylinder",
+           "check_load", "channel"]

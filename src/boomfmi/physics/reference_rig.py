@@ -56,3 +56,7 @@ F_s = 113.255     #: static friction force [N]
 F_d = 85.727      #: Coulomb friction force [N]
 F_L = 261.177     #: load force from the backhoe's weight [N]
 M = 22.7          #: moving mass reduced to the piston [kg]
+
+
+__all__ = ["k", "R", "T", "P_atm", "bore", "rod", "A_a", "A_b", "L", "V_a0", "V_b0", "A_max", "P_s", "P_e", "u_centre",
+           "u_min", "u_max", "a", "b", "h", "l_min", "K_v", "F_s", "F_d", "F_L", "M"]

@@ -42,3 +42,6 @@ def require_non_negative(name: str, value: float) -> None:
     require_finite(name, value)
     if value < 0.0:
         raise ParameterError(name, value, "must be >= 0")
+
+
+__all__ = ["ParameterError", "require_finite", "require_positive", "require_non_negative"]

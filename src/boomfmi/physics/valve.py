@@ -54,3 +54,6 @@ def chamber_flow_slopes(u, p_a, p_b, valve: Valve = Valve(), gas: Gas = Gas()):
     port_b = xp.where(extend, valve.P_e, valve.P_s)
     return (signed_mass_flow_slope(A, port_a, p_a, gas),
             signed_mass_flow_slope(A, port_b, p_b, gas))
+
+
+__all__ = ["orifice_area", "chamber_flows", "chamber_flow_slopes"]

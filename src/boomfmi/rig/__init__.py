@@ -13,7 +13,7 @@ configuration describes.
 """
 from .config import ExcavatorConfig, RigConfig, config_machine, load_config, load_excavator_config
 from .offline import run_excavator_offline, run_offline
-from .plant import ExcavatorRig, ExcavatorSample, JointPlant, MachineRig, Sample, VirtualRig, holding_pressures
+from .plant import ExcavatorRig, ExcavatorSample, JointPlant, MachineRig, Sample, VirtualRig, vented_holding_pressures
 
 
 def make_rig(config=None):
@@ -27,4 +27,4 @@ def make_rig(config=None):
 
 __all__ = ["VirtualRig", "RigConfig", "Sample", "load_config", "ExcavatorConfig", "load_excavator_config",
            "config_machine", "make_rig", "MachineRig", "JointPlant", "ExcavatorRig", "ExcavatorSample",
-           "holding_pressures", "run_offline", "run_excavator_offline"]
+           "vented_holding_pressures", "run_offline", "run_excavator_offline"]

@@ -6,7 +6,10 @@ noise, overrides model parameters, and adds a contact with the ground or a
 disturbance; :class:`boomfmi.rig.plant.VirtualRig` simulates it.
 
 Effects (``RigConfig.effects``: name -> parameters; absent = off; ``{}`` or ``true`` =
-the defaults).  Forms in :mod:`boomfmi.rig.truth`:
+the defaults; :data:`RIG_EFFECTS`, the rig's own configuration names, not the model
+catalogue's).  Forms in :mod:`boomfmi.rig.truth`; an effect plug-in's own rig forms
+(``rig_effects(truth)``: :class:`boomfmi.rig.truth.RigEffect`, in the command, port, seal
+or friction stage) join them by their names and parameters (:func:`plugin_effects`):
 
 =================== ======== ============================== ========= ===============
 effect              name     meaning [unit]                  default   realistic range
@@ -93,7 +96,10 @@ import os
 from dataclasses import dataclass, field
 
 from .. import physics as ph
+from ..model.catalogue import PLUGINS, load_plugins
 from ..physics import reference_rig
+from . import truth
+from .truth import RIG_FORMS, register_rig_effects
 
 #: Model parameters that ``RigConfig.params`` may override, with the reference values.
 PARAMETERS = {
@@ -103,8 +109,10 @@ PARAMETERS = {
     "p_a0": reference_rig.P_atm, "p_b0": reference_rig.P_atm,
 }
 
-#: Each effect's parameters and defaults (names exactly those of effects.md).
-EFFECTS = {
+#: Each of the rig's own effects' parameters and defaults (names exactly those of effects.md;
+#: the rig's configuration names, not the model catalogue's); plug-ins add theirs
+#: (:func:`plugin_effects`).
+RIG_EFFECTS = {
     "valve_dynamics": {"f_n": 100.0, "zeta": 0.7},
     "valve_deadband": {"overlap": 0.4, "edge": 0.15},
     "heat_transfer": {"h_w": 40.0, "A_w0": 0.01, "T_s": reference_rig.T},
@@ -115,7 +123,7 @@ EFFECTS = {
     "sensor_lag": {"delay": 0.003, "tau": 0.005},
 }
 #: Realistic ranges of the effects' parameters (documentation; not enforced).
-EFFECT_RANGES = {
+RIG_EFFECT_RANGES = {
     "valve_dynamics": {"f_n": (60.0, 150.0), "zeta": (0.5, 0.9)},
     "valve_deadband": {"overlap": (0.2, 0.6), "edge": (0.05, 0.3)},
     "heat_transfer": {"h_w": (10.0, 150.0), "A_w0": (0.003, 0.03), "T_s": (283.0, 313.0)},
@@ -235,6 +243,50 @@ def _check_effect(name: str, q: dict, load, cyl) -> None:
     elif name == "sensor_lag":
         _require(f"{key}.delay", 0.0 <= q["delay"] <= 1.0, "must lie in [0, 1] s")
         _require(f"{key}.tau", q["tau"] >= 0.0, "must be >= 0 s")
+    elif name in RIG_FORMS:
+        check = RIG_FORMS[name].check
+        problem = check(q) if check is not None else ""
+        _require(key, not problem, problem)
+    else:
+        raise _err(key, f"no check of the rig's effect {name!r}")
+
+
+def _check_together(key: str, effects: dict) -> None:
+    """The rig's heat_transfer carries each flow's temperature, which a plug-in's port or
+    seal form does not state: refused together."""
+    if "heat_transfer" in effects:
+        flows = [n for n in effects if n in RIG_FORMS and RIG_FORMS[n].stage in ("port", "seal")]
+        _require(f"{key}.{flows[0]}" if flows else key, not flows,
+                 "a plug-in's port or seal form cannot run with heat_transfer on the rig (its flows "
+                 "carry no temperature)")
+
+
+def plugin_effects() -> tuple:
+    """Load the effect plug-ins' rig forms (``rig_effects(truth)`` of each plug-in the
+    model's catalogue loaded, :func:`boomfmi.model.catalogue.load_plugins`) not loaded
+    yet, their configurations' defaults into :data:`RIG_EFFECTS`; return their names."""
+    for plugin in load_plugins():
+        make = getattr(plugin.module, "rig_effects", None)
+        if make is None or plugin.name in _RIG_PLUGINS:
+            continue
+        try:
+            names = register_rig_effects(make(truth), plugin.name, taken=RIG_EFFECTS)
+        except ValueError:
+            raise
+        except Exception as e:
+            raise ValueError(f"effect plug-in {plugin.name}: rig_effects(truth) failed: {type(e).__name__}: {e}") from e
+        _RIG_PLUGINS[plugin.name] = names
+        for n in names:
+            RIG_EFFECTS[n] = dict(RIG_FORMS[n].defaults)
+    for name in [n for n in _RIG_PLUGINS if n not in PLUGINS]:      # a plug-in taken out again
+        for n in _RIG_PLUGINS.pop(name):
+            RIG_EFFECTS.pop(n, None)
+            RIG_FORMS.pop(n, None)
+    return tuple(n for names in _RIG_PLUGINS.values() for n in names)
+
+
+#: plug-in -> the names of its rig forms, loaded by :func:`plugin_effects`
+_RIG_PLUGINS: dict = {}
 
 
 def load_config(source=None) -> RigConfig:
@@ -276,15 +328,16 @@ def load_config(source=None) -> RigConfig:
 
     effects = {}
     for name, value in _table("effects", data.get("effects") or {}).items():
-        if name not in EFFECTS:
-            raise _err(f"effects.{name}", f"unknown effect (known: {', '.join(EFFECTS)})")
+        if name not in RIG_EFFECTS and name not in plugin_effects():
+            raise _err(f"effects.{name}", f"unknown effect (known: {', '.join(RIG_EFFECTS)})")
         if value is None or value is False:
             continue
         if value is True:
             value = {}
-        q = _fill(f"effects.{name}", _table(f"effects.{name}", value), EFFECTS[name])
+        q = _fill(f"effects.{name}", _table(f"effects.{name}", value), RIG_EFFECTS[name])
         _check_effect(name, q, load, cyl)
         effects[name] = q
+    _check_together("effects", effects)
 
     noise_in = _table("noise", data.get("noise") or {})
     noise = {}
@@ -498,13 +551,13 @@ def load_excavator_config(source=None) -> ExcavatorConfig:
         effects = {}
         scale = (act.bore / reference_rig.bore) ** 2
         for name, value in _table(f"{key}.effects", jd.get("effects") or {}).items():
-            if name not in EFFECTS:
-                raise _err(f"{key}.effects.{name}", f"unknown effect (known: {', '.join(EFFECTS)})")
+            if name not in RIG_EFFECTS and name not in plugin_effects():
+                raise _err(f"{key}.effects.{name}", f"unknown effect (known: {', '.join(RIG_EFFECTS)})")
             if value is None or value is False:
                 continue
             if value is True:
                 value = {}
-            defaults = dict(EFFECTS[name])
+            defaults = dict(RIG_EFFECTS[name])
             if name == "stribeck_friction":
                 defaults["F_brk"] = defaults["F_brk"] * scale
             q = _fill(f"{key}.effects.{name}", _table(f"{key}.effects.{name}", value), defaults)
@@ -513,6 +566,7 @@ def load_excavator_config(source=None) -> ExcavatorConfig:
             except ValueError as e:
                 raise ValueError(str(e).replace("rig config: effects.", f"rig config: {key}.effects.")) from None
             effects[name] = q
+        _check_together(f"{key}.effects", effects)
         jn = _noise(f"{key}.noise", _table(f"{key}.noise", jd.get("noise") or {}), noise)
         x0 = _number(f"{key}.x0", jd.get("x0", 0.5 * act.stroke))
         _require(f"{key}.x0", 0.0 <= x0 <= act.stroke, f"must lie within the stroke [0, {act.stroke:g}] m")
@@ -526,3 +580,9 @@ def load_excavator_config(source=None) -> ExcavatorConfig:
     _require("seed", isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0,
              f"must be an integer >= 0, got {seed!r}")
     return ExcavatorConfig(params=params, joints=joints, contact=contact, payload=payload, seed=seed)
+
+__all__ = [
+    "PARAMETERS", "RIG_EFFECTS", "RIG_EFFECT_RANGES", "NOISE", "CONTACTS", "DISTURBANCES", "RigConfig",
+    "model_parameters", "plugin_effects", "load_config", "JOINTS", "EXCAVATOR_PARAMETERS",
+    "JOINT_PARAMETERS", "TIP_CONTACTS", "ExcavatorConfig", "config_machine", "load_excavator_config",
+]

@@ -78,3 +78,6 @@ def run_excavator_offline(config, command, duration: float, dt: float = 1e-3) ->
     df = pd.DataFrame(rows, columns=list(COLUMNS))
     df["t"] = np.round(df["t"].to_numpy(), 9)
     return df
+
+
+__all__ = ["COLUMNS", "run_offline", "sample_row", "run_excavator_offline"]

@@ -405,3 +405,7 @@ def serve(plant, key: bytes, port: int, host: str = "127.0.0.1", lockstep: bool 
     if ready:
         ready(server.port)
     return server.serve()
+
+
+__all__ = ["MCL_CURRENT", "MCL_FUTURE", "COLUMNS", "MAX_WATCHDOG", "MAX_HELD_STEPS", "SO_RXQ_OVFL", "Counters",
+           "RigServer", "realtime_priority", "lock_memory", "serve"]

@@ -71,7 +71,7 @@ Coulomb force F_d (the model's) along a rational curve, viscous K_v v kept::
 
 Sticking is the paper's exact rule (``physics.load.slide_or_stick``) with F_s replaced
 by F_brk and the Coulomb level F_d replaced by F_f(|v|) frozen over each short substep
-(:func:`stribeck_load`).
+(:func:`breakaway_stribeck_load`).
 
 ``pressure_friction``: each seal pressed by the pressure that loads it: the piston
 seal by the higher chamber's gauge pressure, the rod seal by chamber B's; the static
@@ -109,10 +109,11 @@ Contact and disturbance forces (``f_ext`` [N], positive against extension, as in
 from __future__ import annotations
 
 import math
+from typing import Callable, NamedTuple, Optional
 
 from ..physics import reference_rig
 from ..physics.orifice import signed_mass_flow, signed_mass_flow_slope
-from ..physics.params import Cylinder, Gas, Load
+from ..physics.params import Cylinder, Gas, Load, Valve
 
 
 # --------------------------------------------------------------------------- valve
@@ -219,7 +220,7 @@ def stribeck_level(v: float, F_brk: float, F_c: float, v_s: float) -> float:
     return F_c + (F_brk - F_c) / (1.0 + q * q)
 
 
-def stribeck_load(load: Load, v: float, F_brk: float, v_s: float) -> Load:
+def breakaway_stribeck_load(load: Load, v: float, F_brk: float, v_s: float) -> Load:
     """The paper's load parameters with the stick limit F_s replaced by ``F_brk`` [N]
     and the Coulomb level F_d by :func:`stribeck_level` at ``v`` [m/s] (F_d being the
     curve's fast limit): frozen over a short substep of ``advance_load``."""
@@ -308,3 +309,79 @@ def ramp_force(t: float, start: float, rate: float, f_max: float, sign: float) -
 def vibration_force(t: float, amplitude: float, frequency: float) -> float:
     """Engine vibration on the piston [N]: ``amplitude sin(2 pi frequency t)``."""
     return amplitude * math.sin(2.0 * math.pi * frequency * t)
+
+
+# ------------------------------------------------------------ plug-ins' rig forms
+class RigSite(NamedTuple):
+    """What a plug-in's rig form reads of the joint it acts on: the valve's, the gas's
+    and the cylinder's parameters and the atmosphere's pressure [Pa]."""
+    valve: Valve
+    gas: Gas
+    cylinder: Cylinder
+    P_atm: float
+
+
+class RigEffect(NamedTuple):
+    """A plug-in's effect as the virtual rig simulates it: its own form of the mechanism
+    (not the model's candidate form), its configuration's parameters with their defaults
+    (``RigConfig.effects[name]``, as the rig's own effects) and the stage it acts in.
+
+    ``apply``'s signature per stage (``q`` the configured parameters, ``site`` a
+    :class:`RigSite`):
+
+    * ``command``: ``(y, q, site) -> y``, the spool's position [V] to the command the
+      orifices see;
+    * ``port``, ``seal``: ``(m_a, m_b, s_a, s_b, p_a, p_b, x, q, site) -> (m_a, m_b,
+      s_a, s_b)``, the chambers' inflows [kg/s] and their slopes [kg/(s Pa)] at the
+      chambers' absolute pressures [Pa] and the piston's position [m];
+    * ``friction``: ``(load, v, p_a, p_b, q, site) -> load``, the load parameters
+      (:class:`~boomfmi.physics.params.Load`) at the piston's speed [m/s] and pressures.
+
+    ``check(q)``, if given, says why a configuration's values are not physical ('' if
+    they are)."""
+    name: str
+    stage: str
+    defaults: dict
+    apply: Callable
+    check: Optional[Callable] = None
+    summary: str = ""
+
+
+#: the rig's stages a plug-in's form may act in, in the order the rig applies them
+RIG_STAGES = ("command", "port", "seal", "friction")
+#: name -> :class:`RigEffect`: the plug-ins' rig forms (the rig's own effects are the functions above)
+RIG_FORMS: dict = {}
+
+
+def register_rig_effects(entries, owner: str, taken=()) -> tuple:
+    """Add plug-in ``owner``'s rig forms (:class:`RigEffect`), all or none; ``taken``:
+    the names the rig's own effects use.  Raises ``ValueError`` naming the plug-in and
+    the entry at fault."""
+    entries = tuple(entries)
+    for e in entries:
+        if not isinstance(e, RigEffect):
+            raise ValueError(f"effect plug-in {owner}: rig_effects(truth) must return RigEffect entries, "
+                             f"got {type(e).__name__}")
+        if e.name in taken or e.name in RIG_FORMS:
+            raise ValueError(f"effect plug-in {owner}: rig effect {e.name!r}: the name is taken")
+        if e.stage not in RIG_STAGES:
+            raise ValueError(f"effect plug-in {owner}: rig effect {e.name!r}: stage {e.stage!r} is not one of "
+                             f"{', '.join(RIG_STAGES)}")
+        if not callable(e.apply) or not isinstance(e.defaults, dict) or not e.defaults:
+            raise ValueError(f"effect plug-in {owner}: rig effect {e.name!r}: needs apply (its form) and "
+                             f"defaults (its parameters)")
+        bad = [k for k, v in e.defaults.items() if not (isinstance(k, str) and isinstance(v, (int, float))
+                                                         and not isinstance(v, bool) and math.isfinite(v))]
+        if bad:
+            raise ValueError(f"effect plug-in {owner}: rig effect {e.name!r}: default of {bad[0]!r} must be "
+                             f"a finite number")
+    RIG_FORMS.update({e.name: e for e in entries})
+    return tuple(e.name for e in entries)
+
+__all__ = [
+    "spool_transition", "spool_step", "overlap_opening", "overlap_command", "cushion_engagement",
+    "cushion_exhaust_area", "piston_leak_flows", "stribeck_level", "breakaway_stribeck_load",
+    "seal_friction_load", "chamber_wall_areas", "wall_heat_flow", "thermal_equivalent_flow",
+    "chamber_temperature", "first_order_coefficient", "quantise", "spring_contact_force", "ramp_force",
+    "vibration_force", "RigSite", "RigEffect", "RIG_STAGES", "RIG_FORMS", "register_rig_effects",
+]

@@ -330,3 +330,6 @@ def run_table(path, table, parameters: Mapping[str, object] | None = None,
             if i + 1 < len(times):
                 fmu.step(float(times[i + 1] - t))
     return pd.DataFrame(rows)
+
+
+__all__ = ["STATUS", "FmuError", "model_description", "FmuInstance", "run_table"]

@@ -595,3 +595,7 @@ def _input_source(inputs, names: list[str]) -> Callable[[float], Mapping[str, fl
     if callable(inputs):
         return inputs
     raise TypeError(f"inputs must be a mapping, a callable or a DataFrame, not {type(inputs).__name__}")
+
+
+__all__ = ["ALGORITHMS", "NS_PER_S", "MAX_STEPS", "CoSimulation", "simulate_ssp", "fmpy_input", "SHARED",
+           "check_shared"]

@@ -259,3 +259,6 @@ def _check_finite(name: str, value: float, origin: str) -> None:
     declared min and max, with its reasons, when it is initialised."""
     if not math.isfinite(value):
         raise SspError(f"{origin}: parameter {name} = {value}: must be a finite number")
+
+
+__all__ = ["SYSTEM", "Component", "Connection", "SystemStructure", "validate_ssd", "read_ssp", "check_against_fmus"]

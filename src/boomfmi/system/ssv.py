@@ -113,3 +113,6 @@ def write_ssv(path, name: str, parameters: dict[str, tuple[object, str | None]],
     path = Path(path)
     path.write_bytes(ET.tostring(root, encoding="UTF-8", xml_declaration=True))
     return path
+
+
+__all__ = ["NS", "TYPES", "SspError", "Parameter", "parse_parameter_set", "read_ssv", "write_ssv"]

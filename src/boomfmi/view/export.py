@@ -381,3 +381,8 @@ def export(replay, out, fps: float = 25.0, start: float | None = None, stop: flo
     finally:
         plt.close(drawing.fig)
     return out, len(times)
+
+
+__all__ = ["MACHINE", "GHOST", "FORCE", "TRUTH", "STEEL", "BASE", "FORCE_SCALE", "WINDOW", "JOINT_COLORS",
+           "AXIS_COLORS", "TIP_ARROW_MIN", "Drawing", "BoomDrawing", "EXCAVATOR_LINKS", "CYLINDER_BODY", "TIP_SIDE",
+           "LinkageDrawing", "export"]

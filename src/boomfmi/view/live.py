@@ -280,3 +280,8 @@ class LiveSender:
 
     def close(self) -> None:
         self.sock.close()
+
+
+__all__ = ["DEFAULT_RATE", "MAGIC", "MAX_DATAGRAM", "FRESHNESS", "MAX_SESSIONS", "BOUNDS", "EXCAVATOR_JOINTS",
+           "MAX_TIME", "MAX_LENGTH", "REASONS", "Refused", "strict_loads", "geometry", "check_sample", "seal",
+           "open_datagram", "json_depth", "FeedGuard", "LiveSender"]

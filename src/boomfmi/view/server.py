@@ -638,3 +638,9 @@ def serve(replay=None, live: str | None = None, host: str = "127.0.0.1", port: i
     run = load_run(replay) if replay is not None else None
     app = make_app(run, hub, origins)
     asyncio.run(_serve(app, host, port, hub, udp, ready))
+
+
+__all__ = ["WEB", "MODULES", "PAGE_FILES", "VENDOR_FILES", "RATE", "HISTORY", "LOOPBACK", "MAX_MESSAGE",
+           "WS_MAX_MESSAGE", "MAX_BAD_MESSAGES", "MAX_PAGES", "MAX_TIME", "SECURITY_HEADERS", "PAGE", "RUN", "HUB",
+           "ORIGINS", "PAGES", "SOCKETS", "ViewError", "BadMessage", "check_modules", "parse_origin",
+           "allowed_origins", "trust_problem", "parse_command", "Player", "LiveHub", "make_app", "serve"]

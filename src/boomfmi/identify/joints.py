@@ -1,4 +1,5 @@
-"""Identification per joint of the whole excavator from its recordings.
+"""Identification per joint of a machine on the linkage (the whole excavator) from its
+recordings; ``identify.identify_recordings`` runs it on the excavator's recordings.
 
 The linkage's rigid-body dynamics are known (``physics.linkage``: geometry, link
 masses); the unknowns are each cylinder's Eq. 9 friction (K_v, F_s, F_d) and the mass
@@ -14,6 +15,8 @@ bucket's centre of mass: ``M_x(m) = M_x(0) + m (M_x(1) - M_x(0))``).  F_c is
 ``physics.linkage.friction_scale``) and whatever holds it while it rests.
 
 Three stages, as the boom's (``identify.fit``):
+
+Each recording's joints come from ``preprocess.prepare_machine``.
 
 1. **Equation error over every sample** (:func:`equation_rows`): each joint's samples
    are classified as sliding or resting from its own position (``fit.motion_modes``);
@@ -37,21 +40,20 @@ Three stages, as the boom's (``identify.fit``):
    single cylinder (unit areas, the net force on it of everything but its own
    friction and inertia, its diagonal mass ``M_x[i, i]``) and the boom's stage 3
    (``fit.static_friction``) reads its starts.  Its interval is widened to every level
-   within a 95 % likelihood ratio of the starts' combined evidence (:func:`_honest_static`:
+   within a 95 % likelihood ratio of the starts' combined evidence (:func:`honest_static`:
    a start bounds F_s sharply from above and only softly from below), and F_s counts as
    told only where that interval is within :data:`PROMISE` of it.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from .. import physics as ph
 from ..physics import linkage as exc
-from .fit import (Estimate, FitResult, REACH, motion, motion_modes, static_friction, _widened)
-from .preprocess import CUTOFF, Prepared, lowpass
+from .fit import Estimate, FitResult, REACH, motion, static_friction, _widened
+from .preprocess import CUTOFF, JointData, Prepared, lowpass, prepare_machine
 
 JOINTS = exc.JOINTS
 #: Cut-off [Hz] of the state-variable filter G of the equation error (the boom's EE_CUTOFF).
@@ -63,97 +65,12 @@ EE_CUTOFF = 10.0
 TRANSITION_REACH = 0.5
 #: Parameters per joint, and the payload's name.
 JOINT_PARAMS = ("K_v", "F_s", "F_d")
-UNITS = {"K_v": "N.s/m", "F_s": "N", "F_d": "N", "payload": "kg"}
+PARAMETER_UNITS = {"K_v": "N.s/m", "F_s": "N", "F_d": "N", "payload": "kg"}
 SYSTEMATIC_PAYLOAD = 0.02
 #: The accuracy a value reported as identified promises (a relative half-width of its
 #: 95 % interval): F_s is reported as what the data cannot tell where its interval is
 #: wider (``benchmarks/excavator_identification.py``'s target: within 5 % or flagged).
 PROMISE = 0.05
-
-
-@dataclass
-class JointData:
-    """One recording's joint, ready for every stage."""
-    p: Prepared                #: the joint as an equivalent single cylinder (unit areas; F_net as p_a - P_atm)
-    modes: object              #: fit.Modes of its position
-    F_p: np.ndarray            #: pneumatic force [N], from the raw pressures
-    scale: np.ndarray          #: Eq. 9's factor (cos(phi) for the boom, 1 otherwise)
-    D0: np.ndarray             #: M_x(0) x'' + bias(0) - lam J^T f_tip [N] (25 Hz signals)
-    dD: np.ndarray             #: the payload's share per kg [N/kg]
-    own0: np.ndarray           #: the joint's own inertia M_x[i,i](0) x''_i [N]
-    unsure: np.ndarray         #: [N] the other joints' motion's share of D0 (D0 - own0 - gravity, no payload):
-                               #: known only as well as their filtered accelerations and speeds
-    down: np.ndarray           #: its payload share per kg [N/kg]
-    Mii0: np.ndarray           #: M_x[i, i] at no payload [kg]
-    dMii: np.ndarray           #: per kg of payload
-    L: float
-
-
-def _frame(rec):
-    """The recording's data as a DataFrame (a Recording or a DataFrame)."""
-    return rec.data if hasattr(rec, "data") else rec
-
-
-def _P_atm(rec, ex):
-    return float(rec.P_atm) if hasattr(rec, "P_atm") else ex.P_atm
-
-
-def prepare_excavator(rec, ex: exc.Excavator = exc.Excavator(), cutoff: float = CUTOFF) -> list[JointData]:
-    """Filter an excavator recording (``Recording`` or DataFrame with the excavator's
-    columns, pressures gauge) and evaluate the linkage's known terms at every sample;
-    one :class:`JointData` per joint of :data:`JOINTS`."""
-    d = _frame(rec)
-    P_atm = _P_atm(rec, ex)
-    t = d["t"].to_numpy(float)
-    fs = 1.0 / float(np.median(np.diff(t)))
-    q_raw = np.column_stack([d[f"angle_{j}"].to_numpy(float) for j in JOINTS])
-    x_raw = exc.pistons_from_angles(q_raw, ex)
-    x = np.column_stack([lowpass(x_raw[:, i], fs, cutoff) for i in range(4)])
-    v = np.gradient(x, t, axis=0)
-    a = np.gradient(v, t, axis=0)
-    p_a = np.column_stack([d[f"p_a_{j}"].to_numpy(float) for j in JOINTS]) + P_atm
-    p_b = np.column_stack([d[f"p_b_{j}"].to_numpy(float) for j in JOINTS]) + P_atm
-    F_p = exc.cylinder_forces(p_a, p_b, ex)
-    f_tip = None
-    if all(c in d for c in ("f_tip_x", "f_tip_y", "f_tip_z")):
-        f_tip = d[["f_tip_x", "f_tip_y", "f_tip_z"]].to_numpy(float)
-        if not np.any(f_tip):
-            f_tip = None
-    n = len(t)
-    xc = np.clip(x, 0.0, ex.strokes)
-    D = np.empty((2, n, 4))
-    own = np.empty((2, n, 4))
-    Mii = np.empty((2, n, 4))
-    unsure = np.empty((n, 4))
-    zero = np.zeros(4)
-    for k in range(n):
-        for m in (0, 1):
-            Mx, bias, lam = exc.piston_dynamics(xc[k], v[k], float(m), ex)
-            D[m, k] = Mx @ a[k] + bias
-            own[m, k] = np.diag(Mx) * a[k]
-            Mii[m, k] = np.diag(Mx)
-        unsure[k] = np.abs(D[0, k] - own[0, k] - exc.piston_dynamics(xc[k], zero, 0.0, ex)[1])
-        if f_tip is not None:
-            q = exc.joint_angles(xc[k], ex)
-            tau = exc.tip_torques(q, f_tip[k], ex) / exc.lever_arms(xc[k], ex)
-            D[0, k] -= tau
-            D[1, k] -= tau
-    scale = exc.friction_scale(xc, ex)
-    phi_boom = ph.phi_from_x(xc[:, 1], ex.geometry)
-    out = []
-    for i, (j, act) in enumerate(zip(JOINTS, ex.actuators)):
-        F_net = F_p[:, i] - (D[0, :, i] - own[0, :, i])     # everything on it but its own inertia and friction
-        phi = phi_boom if j == "boom" else np.zeros(n)
-        p = Prepared(t=t, u=d[f"u_{j}"].to_numpy(float), p_a=lowpass(F_net, fs, cutoff) + P_atm,
-                     p_b=np.full(n, P_atm), x=x[:, i], v=v[:, i], a=a[:, i], phi=phi, x_raw=x_raw[:, i],
-                     p_a_raw=F_net + P_atm, p_b_raw=np.full(n, P_atm), fs=fs, cutoff=cutoff,
-                     source=f"{getattr(rec, 'path', '')}:{j}")
-        out.append(JointData(p=p, modes=motion_modes(p, act.stroke), F_p=F_p[:, i], scale=scale[:, i],
-                             D0=D[0, :, i], dD=D[1, :, i] - D[0, :, i], own0=own[0, :, i],
-                             unsure=unsure[:, i],
-                             down=own[1, :, i] - own[0, :, i], Mii0=Mii[0, :, i], dMii=Mii[1, :, i] - Mii[0, :, i],
-                             L=act.stroke))
-    return out
 
 
 def equation_rows(joints: list[JointData], cutoff: float = EE_CUTOFF):
@@ -243,7 +160,7 @@ def equation_error(data: list[list[JointData]], n_boot: int = 200, block: float 
                  "rms_residual_N": {j: float(np.sqrt(np.mean(res[joint == i] ** 2))) for i, j in enumerate(JOINTS)}}
 
 
-def _equivalent(jd: JointData, payload: float) -> Prepared:
+def equivalent(jd: JointData, payload: float) -> Prepared:
     """The joint as a single cylinder with the payload's share in its net force."""
     p = jd.p
     extra = payload * (jd.dD - jd.down)
@@ -253,7 +170,7 @@ def _equivalent(jd: JointData, payload: float) -> Prepared:
                     cutoff=p.cutoff, source=p.source)
 
 
-def _honest_static(F_s: Estimate, info: dict) -> tuple[Estimate, bool]:
+def honest_static(F_s: Estimate, info: dict) -> tuple[Estimate, bool]:
     """F_s's interval widened to every level its starts' combined evidence allows
     (``fit.static_friction``'s ``likelihood_range_N``: a start bounds F_s sharply from
     above and only softly from below, so the posterior is flat-topped with the truth
@@ -268,12 +185,12 @@ def _honest_static(F_s: Estimate, info: dict) -> tuple[Estimate, bool]:
     return est, bool(hi_L < top and est.relative_halfwidth < PROMISE)
 
 
-def identify_excavator(recordings, ex: exc.Excavator = exc.Excavator(), cutoff: float = CUTOFF) -> FitResult:
+def identify_joints(recordings, ex: exc.Excavator = exc.Excavator(), cutoff: float = CUTOFF) -> FitResult:
     """Each cylinder's K_v, F_s, F_d and the payload [kg] from excavator recordings
     (``Recording`` objects or DataFrames with the excavator's columns), the linkage's
     geometry and link masses ``ex`` known.  Parameters are named ``<name>_<joint>``
-    (``K_v_arm``) and ``payload``; see the module's docstring."""
-    data = [prepare_excavator(r, ex, cutoff) for r in recordings]
+    (``K_v_arm``, ``physics.params.channel``) and ``payload``; see the module's docstring."""
+    data = [prepare_machine(r, ex, cutoff) for r in recordings]
     est, info = equation_error(data)
     details = {"equation_error": info, "static_friction": {}}
     warnings = []
@@ -282,7 +199,7 @@ def identify_excavator(recordings, ex: exc.Excavator = exc.Excavator(), cutoff: 
         act = ex.actuators[i]
         cyl = ph.Cylinder(A_a=1.0, A_b=1.0, L=act.stroke, V_a0=act.V_a0, V_b0=act.V_b0)
         P_atm = ex.P_atm
-        motions = [motion(_equivalent(r[i], payload), cyl, P_atm) for r in data]
+        motions = [motion(equivalent(r[i], payload), cyl, P_atm) for r in data]
         # the joint's own mass where each start happens (it moves with the posture)
         M = [r[i].Mii0 + payload * r[i].dMii for r in data]
         # the other joints' motion's share of the net force is known only as well as
@@ -292,7 +209,7 @@ def identify_excavator(recordings, ex: exc.Excavator = exc.Excavator(), cutoff: 
                 "F_unsure": [r[i].unsure for r in data]}
         F_s, identified, info3 = static_friction(motions, base, cyl, P_atm)
         if F_s is not None:
-            F_s, identified = _honest_static(F_s, info3)
+            F_s, identified = honest_static(F_s, info3)
         details["static_friction"][j] = dict(info3, identified=bool(identified))
         if F_s is None:
             warnings.append(f"{j}: no start of motion from rest: F_s_{j} cannot be identified; F_d is used")
@@ -317,5 +234,5 @@ def true_values(ex: exc.Excavator = exc.Excavator(), payload: float = 0.0) -> di
     return out
 
 
-__all__ = ["identify_excavator", "prepare_excavator", "equation_error", "true_values",
-           "JOINTS", "UNITS"]
+__all__ = ["identify_joints", "equation_rows", "equation_error", "equivalent", "honest_static", "true_values",
+           "JOINTS", "JOINT_PARAMS", "PARAMETER_UNITS", "EE_CUTOFF", "PROMISE"]
