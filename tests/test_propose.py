@@ -68,6 +68,9 @@ def test_the_command_csv_round_trips_through_the_command_reader(tmp_path):
     back = profile(str(path))            # as `boomfmi record --experiment next.csv` reads it
     assert back.duration == pytest.approx(t[-1])
     assert np.allclose([back(float(s))["u"] for s in t], u, atol=1e-6)
+    from boomfmi.simulate import experiment_inputs   # and `boomfmi simulate --experiment next.csv`
+    table, stop = experiment_inputs(str(path), ["valve.u"])
+    assert stop == pytest.approx(t[-1]) and np.allclose(table["valve.u"], u, atol=1e-6)
 
 
 @pytest.mark.parametrize("text, where", [("time,u\n0,5\n", "line 1"),

@@ -336,6 +336,16 @@ def profile(name: str) -> Callable[[float], dict]:
 COMMAND_COLUMNS = ("t", "u")
 
 
+def is_command_file(path) -> bool:
+    """Whether ``path`` is a command CSV (its header exactly ``t,u``), not a recording."""
+    try:
+        with open(path, newline="") as f:
+            header = f.readline()
+    except OSError:
+        return False
+    return [c.strip() for c in header.strip().split(",")] == list(COMMAND_COLUMNS)
+
+
 def command_samples(prof: Callable[[float], dict], dt: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
     """A profile sampled as the DAQ sends it: times ``0, dt, ...`` up to its duration and
     the command ``u`` [V] at each (held until the next sample)."""
@@ -813,7 +823,7 @@ def excavator_profile(name: str) -> Callable[[float], dict]:
 
 __all__ = ["PAPER_LEVELS", "multistep", "paper_multistep", "holdout_multistep", "random_steps", "held", "slow_ramps",
            "manoeuvres", "sine_sweep", "MLS_TAPS", "mls", "pseudo_random_steps", "joystick", "dig", "PROFILES",
-           "profile", "COMMAND_COLUMNS", "command_samples", "command_file", "JOINTS", "CENTRE", "held_joints", "DIG_CYCLE",
+           "profile", "COMMAND_COLUMNS", "is_command_file", "command_samples", "command_file", "JOINTS", "CENTRE", "held_joints", "DIG_CYCLE",
            "digging_cycle", "per_joint", "excavator_random_steps", "excavator_manoeuvres", "excavator_excitation",
            "TipContact", "CONTACTS", "contact", "JointTrajectoryController", "OPERATOR_GAINS", "DIG_TRAJECTORY",
            "PUSH_TRAJECTORY", "closed_loop_dig", "closed_loop_hold", "TIP_FORCE_SCENARIOS", "tip_force_scenario",

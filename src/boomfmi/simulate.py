@@ -21,7 +21,8 @@ import pandas as pd
 
 from . import physics as ph
 from .compare import initial_state
-from .experiments import EXCAVATOR_PROFILES, PROFILES, excavator_profile, profile
+from .experiments import (EXCAVATOR_PROFILES, PROFILES, command_file, command_samples, excavator_profile, is_command_file,
+                          profile)
 from .physics import reference_rig
 from .physics.validation import require_positive
 from .recording import read_experiment
@@ -70,6 +71,10 @@ def experiment_inputs(experiment: str, input_names: list[str]):
     if path.suffix.lower() != ".csv" and not path.exists():
         raise ValueError(f"unknown experiment {experiment!r}: give one of {', '.join(PROFILES)} "
                          f"or a recording (.csv)")
+    if is_command_file(path):          # a command CSV (t, u: diagnose --propose writes one)
+        prof = command_file(path)
+        t, u = command_samples(prof)
+        return pd.DataFrame({"t": t, **{n: u for n in input_names}}), prof.duration
     rec = read_experiment(path)
     table = pd.DataFrame({"t": rec.data["t"], **{n: rec.data["u"] for n in input_names}})
     return table, float(rec.data["t"].iloc[-1])
