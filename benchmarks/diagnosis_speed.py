@@ -67,7 +67,7 @@ def main(argv=None) -> int:
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
     for name in (CASES if args.case == "all" else [args.case]):
         wall, doc, duration = run_case(name)
-        pairs = sum(" + " in c["name"] for c in doc.get("effects", []))
+        pairs = sum("+" in c["name"] for c in doc.get("effects", []))     # a pair's name: "a+b"
         print(f"{name}: diagnosis of 2 fit + 1 holdout recordings of {duration:g} s: {wall:.1f} s wall "
               f"(target 60 s); {pairs} pair(s) among the candidates reported; verdict {doc['verdict']}")
     return 0
