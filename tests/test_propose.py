@@ -68,7 +68,8 @@ def test_the_command_csv_round_trips_through_the_command_reader(tmp_path):
     back = profile(str(path))            # as `boomfmi record --experiment next.csv` reads it
     assert back.duration == pytest.approx(t[-1])
     assert np.allclose([back(float(s))["u"] for s in t], u, atol=1e-6)
-    from boomfmi.simulate import experiment_inputs   # and `boomfmi simulate --experiment next.csv`
+    from boomfmi.simulate import experiment_inputs, rig_parameters   # and `boomfmi simulate --experiment next.csv`
+    assert rig_parameters(str(path), {"valve": {"P_s"}}) == {}          # a command has no rig of its own
     table, stop = experiment_inputs(str(path), ["valve.u"])
     assert stop == pytest.approx(t[-1]) and np.allclose(table["valve.u"], u, atol=1e-6)
 

@@ -319,7 +319,8 @@ def dig() -> Callable[[float], dict]:
 
 
 PROFILES = {"paper_multistep": paper_multistep, "holdout_multistep": holdout_multistep,
-            "random_steps": random_steps, "manoeuvres": manoeuvres, "sine_sweep": sine_sweep, "dig": dig}
+            "random_steps": random_steps, "slow_ramps": slow_ramps, "manoeuvres": manoeuvres,
+            "sine_sweep": sine_sweep, "dig": dig}
 
 
 def profile(name: str) -> Callable[[float], dict]:

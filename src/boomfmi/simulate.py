@@ -45,7 +45,7 @@ def rig_parameters(experiment: str, parameters: dict) -> dict:
     """A recording's sidecar overrides as SSP parameters: each value goes to every
     component parameter of that name (``P_s`` to ``valve.P_s``, ``a`` to
     ``boom_load.a``...)."""
-    if experiment in PROFILES:
+    if experiment in PROFILES or is_command_file(experiment):     # no sidecar: the SSP's own rig
         return {}
     over = read_experiment(experiment).rig_values()
     return {f"{comp}.{name}": value for name, value in over.items()

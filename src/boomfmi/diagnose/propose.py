@@ -37,8 +37,7 @@ import numpy as np
 import pandas as pd
 
 from ..compare import CHANNELS, recorded, simulate_recording
-from ..experiments import COMMAND_COLUMNS, command_samples, manoeuvres, paper_multistep, random_steps, \
-    sine_sweep, slow_ramps
+from ..experiments import COMMAND_COLUMNS, PROFILES, command_samples
 from ..identify.preprocess import noise_floor
 from ..recording import Recording
 from .evidence import NONE, UNEXPLAINED
@@ -59,8 +58,6 @@ DESIGNS = (
     ("manoeuvres", {"seed": 1, "duration": 10.0}),
     ("sine_sweep", {"seed": 1, "duration": 10.0}),
 )
-_MAKERS = {"paper_multistep": paper_multistep, "random_steps": random_steps, "slow_ramps": slow_ramps,
-           "manoeuvres": manoeuvres, "sine_sweep": sine_sweep}
 
 
 @dataclass
@@ -125,9 +122,9 @@ def ambiguous(probabilities: dict, factor: float = AMBIGUOUS) -> tuple[str, str]
 
 def design_profile(design: str, params: dict):
     """The command profile ``experiments.<design>(**params)``."""
-    if design not in _MAKERS:
-        raise ValueError(f"unknown design {design!r}; known: {', '.join(_MAKERS)}")
-    return _MAKERS[design](**params)
+    if design not in PROFILES:
+        raise ValueError(f"unknown design {design!r}; known: {', '.join(PROFILES)}")
+    return PROFILES[design](**params)
 
 
 def start_recording(prof, start: Recording) -> Recording:
