@@ -323,10 +323,10 @@ def diagnose_case(case: dict, cache: Path, resume: bool) -> dict:
         kept = json.loads(done.read_text())
         if kept.get("case") == info["case"] and kept.get("error") is None:     # a failed one is run again
             return {"info": info, **kept}
-    from boomfmi.diagnose.excavator_report import diagnose_excavator_recordings
+    from boomfmi.diagnose.report import diagnose
     t0 = time.perf_counter()
     try:
-        doc = diagnose_excavator_recordings([d / "fit.csv"], [d / "hold.csv"], out)
+        doc = diagnose([d / "fit.csv"], [d / "hold.csv"], out)
         error = None
     except Exception as e:                      # a case that fails is reported, not fatal
         doc, error = None, f"{type(e).__name__}: {e}\n{traceback.format_exc(limit=4)}"

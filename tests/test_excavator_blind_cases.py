@@ -19,9 +19,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from boomfmi.diagnose import excavator as dx
+from boomfmi.diagnose import joints as dx
 from boomfmi.diagnose import joint_load as jl
-from boomfmi.diagnose.excavator import CutFinding, Fitted, JointFinding, joint_pressures
+from boomfmi.diagnose.joints import CutFinding, Fitted, JointFinding, joint_pressures
 from boomfmi.physics import linkage as exc
 
 

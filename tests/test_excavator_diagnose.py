@@ -1,4 +1,4 @@
-"""Diagnosis per joint of excavator recordings (``diagnose/excavator.py``: fitted on a fit
+"""Diagnosis per joint of excavator recordings (``diagnose/joints.py``: fitted on a fit
 recording, scored on a holdout), and the tip force from the informative joints on the
 soil contact scenarios."""
 import json
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from boomfmi import experiments as E
-from boomfmi.diagnose.excavator import diagnose_excavator
+from boomfmi.diagnose.joints import diagnose_joints
 from boomfmi.physics.force_estimation import estimate_tip_force
 from boomfmi.rig import run_excavator_offline
 
@@ -31,7 +31,7 @@ def _record(name):
 def test_effect_free_recording_gives_no_finding():
     """(The bucket's rod side falls a little below the atmosphere, where the rig's
     0 .. 10 bar gauge sensor reads 0: compared as sensed, not as a gap.)"""
-    assert diagnose_excavator(*_record("excavator_none")).verdict == []
+    assert diagnose_joints(*_record("excavator_none")).verdict == []
 
 
 def test_a_sensor_rail_is_no_gap_and_noise_is_no_rail():

@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from boomfmi.diagnose.excavator import CutFinding, Fitted, _decide, _model_error, threshold
+from boomfmi.diagnose.joints import CutFinding, Fitted, _decide, _model_error, threshold
 
 
 def _cut(gap, noise, fit_gap, candidates):

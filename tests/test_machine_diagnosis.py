@@ -1,7 +1,7 @@
 """Diagnosis of the whole excavator (issue 32, item 2): every effect of the catalogue on any
 joint, fitted on the fit recordings and scored on the holdouts, pairs across joints,
 friction through each joint's load cut; on the four-joint virtual rig
-(``rig.run_excavator_offline``), through ``diagnose_excavator_recordings``
+(``rig.run_excavator_offline``), through ``diagnose.report.diagnose``
 (the command's entry point)."""
 import json
 import math
@@ -10,9 +10,9 @@ import pytest
 
 from boomfmi import experiments as E
 from boomfmi.diagnose.attribute import MIN_SHRINK
-from boomfmi.diagnose.excavator import (PNEUMATIC_STAGES, candidates, diagnose_excavator, joint_cut, joint_gap,
-                                        joint_pressures, unlagged)
-from boomfmi.diagnose.excavator_report import diagnose_excavator_recordings
+from boomfmi.diagnose.joints import (PNEUMATIC_STAGES, candidates, diagnose_joints, joint_cut, joint_gap,
+                                     joint_pressures, unlagged)
+from boomfmi.diagnose.report import diagnose
 from boomfmi.recording import write_recording
 from boomfmi.rig import run_excavator_offline
 
@@ -35,7 +35,7 @@ def _case(tmp_path, joints, fit_seconds, hold, hold_seconds):
     ``tmp_path/out``."""
     fit, hold = _runs(joints, fit_seconds, hold, hold_seconds)
     fit, hold = _recording(fit, tmp_path / "fit.csv"), _recording(hold, tmp_path / "hold.csv")
-    doc = diagnose_excavator_recordings([fit], [hold], tmp_path / "out")
+    doc = diagnose([fit], [hold], tmp_path / "out")
     assert doc == json.loads((tmp_path / "out" / "diagnosis.json").read_text())
     return doc
 
@@ -104,7 +104,7 @@ def test_a_slow_spool_on_the_arm_is_named(tmp_path):
 
 
 def test_an_effect_free_machine_gives_no_finding():
-    found = diagnose_excavator(*_runs({}, 6.0, E.digging_cycle(), 6.0))
+    found = diagnose_joints(*_runs({}, 6.0, E.digging_cycle(), 6.0))
     assert found.verdict == []
     for j, f in found.joints.items():  # both cuts judged on every joint, each within its threshold
         assert not f.flagged and f.candidates == []
@@ -124,7 +124,7 @@ def test_a_pair_across_joints_is_named(tmp_path):
     flagged.  (This is also the test of a leak on the arm named with its joint.)"""
     joints = {"arm": {"effects": {"piston_leakage": {"A_leak": 3e-8}}},
               "bucket": {"effects": {"valve_deadband": {"overlap": 0.4}}}}
-    found = diagnose_excavator(*_runs(joints, 6.0, E.excavator_excitation(seed=2, duration=6.0), 6.0))
+    found = diagnose_joints(*_runs(joints, 6.0, E.excavator_excitation(seed=2, duration=6.0), 6.0))
     assert sorted(found.verdict) == ["piston_leakage@arm", "valve_deadband@bucket"]
     for joint, name in (("arm", "piston_leakage"), ("bucket", "valve_deadband")):
         cut = found.joints[joint].pressures
@@ -143,7 +143,7 @@ def test_a_friction_effect_is_named_through_the_joint_load():
     runs on the measured motion), fitted with the arm's load re-identified.  (The boom's
     load, identified on 8 s of excitation about 9 % off in F_d, may draw a Stribeck
     curve on the holdout's lift: the load identification's spread, not asserted here.)"""
-    found = diagnose_excavator(*_runs({"arm": {"effects": {"pressure_friction": {}}}}, 8.0, E.digging_cycle(), 8.0))
+    found = diagnose_joints(*_runs({"arm": {"effects": {"pressure_friction": {}}}}, 8.0, E.digging_cycle(), 8.0))
     assert "pressure_friction@arm" in found.verdict
     lc = found.joints["arm"].position
     best = lc.candidates[0]

@@ -292,12 +292,17 @@ def _diagnose(args) -> int:
         if clash:
             raise OutputError(f"--propose {args.propose}: that is the diagnosis' own {clash[0]}; give the "
                               f"command CSV another name")
-    if common_kind([*args.recordings, *args.holdout]) == "excavator":
-        return _diagnose_excavator(args)
+    common_kind([*args.recordings, *args.holdout])      # the boom's or the excavator's: a mix is refused
     from .diagnose import diagnose
     doc = diagnose(args.recordings, args.holdout, args.out, ssp=args.ssp,
                    progress=lambda text: print(f"diagnose: {text}", file=sys.stderr, flush=True),
                    machine=_machine(args), propose=args.propose)
+    if doc.get("kind") == "excavator":                  # found per joint: each joint's gap and finding
+        from .diagnose.report import summary_lines
+        for line in summary_lines(doc):
+            print(line)
+        print(f"wrote {args.out}/diagnosis.json and {args.out}/report.html")
+        return 0
     for w in (doc.get("baseline") or {}).get("warnings", []):
         print(f"warning (baseline): {w}")
     if not doc["judgeable"]:
@@ -327,22 +332,6 @@ def _diagnose(args) -> int:
                                                                            else ""))
     elif args.propose is not None:
         print(f"no experiment proposed, {args.propose} not written: no two explanations to tell apart")
-    print(f"wrote {args.out}/diagnosis.json and {args.out}/report.html")
-    return 0
-
-
-def _diagnose_excavator(args) -> int:
-    """``diagnose`` on the whole excavator's recordings: per joint, which joint and which effect."""
-    if args.ssp is not None:
-        raise ValueError("--ssp confirms a boom verdict through the boom's FMUs; the whole excavator's per-joint "
-                         "diagnosis has no confirmation through the FMUs")
-    if args.propose is not None:
-        raise ValueError("--propose designs the boom's next experiment; the whole excavator's per-joint diagnosis "
-                         "proposes none")
-    from .diagnose.excavator_report import diagnose_excavator_recordings, summary_lines
-    doc = diagnose_excavator_recordings(args.recordings, args.holdout, args.out, progress=_progress("diagnose"))
-    for line in summary_lines(doc):
-        print(line)
     print(f"wrote {args.out}/diagnosis.json and {args.out}/report.html")
     return 0
 

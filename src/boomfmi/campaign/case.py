@@ -6,8 +6,8 @@ input.  :func:`run_case` writes them into a temporary folder, runs the identific
 (``params.json`` with the 95 % intervals, ``params.ssv``, ``params.png``) and the
 diagnosis (``diagnosis.json``, ``report.html``, its PNGs) exactly as ``boomfmi
 identify`` and ``boomfmi diagnose`` do (a case of the whole excavator's recordings: its
-diagnosis, ``diagnose.excavator_report``, which identifies the baseline per joint and
-writes ``diagnosis.json`` and ``report.html``), and returns every file written, with the
+diagnosis per joint, ``diagnose.report.diagnose``, which identifies the baseline per joint
+and writes ``diagnosis.json`` and ``report.html``), and returns every file written, with the
 temporary paths in their texts put back to the recordings' own, and a summary for the
 campaign's trends.  A case that fails returns its error (never raises): the rest of
 the campaign goes on.
@@ -110,10 +110,7 @@ def run_case(spec: dict) -> dict:
             paths[f["role"]].append(p)
         out = tmp / "out"
         try:
-            if spec.get("kind", "boom") == "excavator":
-                result["summary"] = _diagnose_excavator(paths["fit"], paths["holdout"], out, log)
-            else:
-                result["summary"] = _identify_and_diagnose(paths["fit"], paths["holdout"], out, spec.get("ssp"), log)
+            result["summary"] = _identify_and_diagnose(paths["fit"], paths["holdout"], out, spec.get("ssp"), log)
             result["status"] = "done"
         except Exception as e:            # reported with the case, never raised: the campaign goes on
             result["error"] = _restore(f"{type(e).__name__}: {e}", sources)
@@ -146,6 +143,9 @@ def _restore(text: str, sources: dict, kind: str = "") -> str:
 
 
 def _identify_and_diagnose(fit, hold, out, ssp, log) -> dict:
+    """The case's diagnosis (``diagnose.report.diagnose``, for the boom's recordings or
+    the whole excavator's: per joint, :func:`_joints_summary`) and, for the boom's, its
+    identification's outputs."""
     from ..diagnose import diagnose
     from ..identify import identify_recordings, write_outputs
 
@@ -154,6 +154,8 @@ def _identify_and_diagnose(fit, hold, out, ssp, log) -> dict:
         result, recs, _ = identify_recordings(fit, "fit")
         return result, recs
     doc = diagnose(fit, hold, out, workers=1, ssp=ssp, progress=log.append, baseline=baseline)
+    if doc.get("kind") == "excavator":
+        return _joints_summary(doc)
     summary = {"judgeable": doc["judgeable"], "verdict": doc["verdict"]}
     if not doc["judgeable"]:
         summary["reason"] = doc["reason"]
@@ -177,16 +179,14 @@ def _identify_and_diagnose(fit, hold, out, ssp, log) -> dict:
     return summary
 
 
-def _diagnose_excavator(fit, hold, out, log) -> dict:
-    """A case of the whole excavator's recordings: its diagnosis
-    (``diagnose.excavator_report.diagnose_excavator_recordings``), summarised as a boom
-    case is: the baseline's per-joint parameters (``K_v_arm``, ..., ``payload``; those
-    identification cannot tell marked so), the holdouts' NRMSE per joint and channel
-    (``p_a_arm``), and each fitted effect on its joint (``piston_leakage@arm``, as the
-    verdict names it) with the gap it removes on that joint's cut (``gain``) and that
-    joint's threshold (``margin``, for the trends' flag rule)."""
-    from ..diagnose.excavator_report import diagnose_excavator_recordings
-    doc = diagnose_excavator_recordings(fit, hold, out, progress=log.append)
+def _joints_summary(doc: dict) -> dict:
+    """A case of the whole excavator's recordings (its diagnosis per joint, ``doc``),
+    summarised as a boom case is: the baseline's per-joint parameters (``K_v_arm``, ...,
+    ``payload``; those identification cannot tell marked so), the holdouts' NRMSE per
+    joint and channel (``p_a_arm``), and each fitted effect on its joint
+    (``piston_leakage@arm``, as the verdict names it) with the gap it removes on that
+    joint's cut (``gain``) and that joint's threshold (``margin``, for the trends' flag
+    rule)."""
     summary = {"kind": "excavator", "judgeable": doc.get("judgeable", True), "verdict": doc["verdict"]}
     if not summary["judgeable"]:
         summary["reason"] = doc.get("reason")

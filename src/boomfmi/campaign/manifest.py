@@ -29,7 +29,7 @@ recording, a case or a machine whose recordings are of both kinds.
 
 A case of boom recordings is identified and diagnosed as ``boomfmi identify`` and
 ``boomfmi diagnose`` do; a case of excavator recordings by the whole machine's
-diagnosis (``diagnose.excavator_report``), its per-joint parameters (``K_v_arm``...)
+diagnosis (``diagnose.report.diagnose``, per joint), its per-joint parameters (``K_v_arm``...)
 in the trends.
 """
 from __future__ import annotations

@@ -2,7 +2,8 @@
 
 ``localise`` says where the model and a recording disagree: per channel, operating
 regime and subsystem; ``attribute`` which effect of ``effects.md`` explains it and by
-how much; ``diagnose`` runs both and writes the report.
+how much; ``diagnose`` runs both and writes the report (``report``: one entry for one
+joint or four; the whole excavator's recordings are judged joint by joint, ``joints``).
 
 One meaning per name: ``boomfmi.diagnose.attribute`` and ``boomfmi.diagnose.localise``
 are the modules (their functions are ``attribute.attribute`` and ``localise.localise``);

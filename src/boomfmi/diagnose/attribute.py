@@ -71,6 +71,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Mapping
 import multiprocessing
 import os
 import sys
@@ -88,12 +89,37 @@ from ..model.boom import measurement_lag
 from ..model.catalogue import STAGES, fit_hook
 from .evidence import NONE, UNEXPLAINED, Hypothesis, probabilities, residual_counts
 
+class _Laws(Mapping):
+    """The catalogue's laws as the fits read them, read from :data:`model.EFFECTS` at
+    each use (not copied at import): a plug-in's effect loaded later (``boomfmi --effects
+    FILE``, ``catalogue.load_plugins``) is a candidate on the boom and on each joint's
+    cut alike.  ``several``: only the effects with more than one law, each as its laws;
+    else every effect as its first law."""
+
+    def __init__(self, several: bool):
+        self._several = several
+
+    def _names(self):
+        return [n for n, e in EFFECTS.items() if not self._several or len(e.forms) > 1]
+
+    def __getitem__(self, name):
+        if name not in self._names():
+            raise KeyError(name)
+        laws = [[(p.name, p.lower, p.upper, p.log) for p in form] for form in EFFECTS[name].forms]
+        return laws if self._several else laws[0]
+
+    def __iter__(self):
+        return iter(self._names())
+
+    def __len__(self):
+        return len(self._names())
+
+
 #: name -> [(parameter, lower, upper, log scale)] of its first law, from the catalogue
-CANDIDATES = {name: [(p.name, p.lower, p.upper, p.log) for p in e.forms[0]] for name, e in EFFECTS.items()}
+CANDIDATES = _Laws(several=False)
 #: effects with more than one law for their mechanism: each law is fitted and the one
 #: that fits the fit recordings best is kept (a seal leaks laminar or turbulent)
-FORMS = {name: [[(p.name, p.lower, p.upper, p.log) for p in form] for form in e.forms]
-         for name, e in EFFECTS.items() if len(e.forms) > 1}
+FORMS = _Laws(several=True)
 MIN_SHRINK = 0.35
 MIN_SHRINK_SECOND = 0.4     #: the share of the gap left by the best that a second effect must remove (the excavator's cuts)
 PAIR_POOL = 3               #: the candidates among which the excavator's cuts try pairs

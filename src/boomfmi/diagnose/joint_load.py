@@ -1,6 +1,6 @@
 """One joint of the whole excavator as a load cut: its friction judged on its own motion.
 
-The excavator's pneumatic cut (``diagnose/excavator.py``) runs a joint's valve and
+The excavator's pneumatic cut (``diagnose/joints.py``) runs a joint's valve and
 chambers on its measured motion; an effect on the joint's friction shows there only
 through that motion, which is measured.  The **load cut** is the other half: the joint
 as an equivalent single cylinder (``identify.preprocess.prepare_machine``: unit areas,

@@ -21,15 +21,19 @@ import numpy as np
 from concurrent.futures import ProcessPoolExecutor
 
 from .._json import dumps, plain
-from ..compare import CHANNELS, model_for, nrmse, recorded, rig_model, shrink, simulate_recording
-from ..identify import identify_recordings
-from ..identify.preprocess import prepare
+from ..compare import CHANNELS, as_sensed, model_for, nrmse, recorded, rig_model, shrink, simulate_recording
+from ..identify import identify_recordings, identify_recs
+from ..identify.outputs import bound_machine, cannot_tell, joint_nrmse, measured_pistons, simulate_machine, ssv_values
+from ..identify.preprocess import machine_for, machine_of, prepare
 from ..machine import assumption
 from ..outputs import OutputSet
-from ..recording import check_distinct, check_no_duplicates, check_same_rig, read_checked
-from .attribute import ABS_FLOOR, CANDIDATES, NOISE_FACTOR, attribute, may_start_processes
+from ..physics import reference_rig
+from ..physics.linkage import JOINTS
+from ..recording import check_distinct, check_no_duplicates, check_same_rig, common_kind, read_checked
+from .attribute import ABS_FLOOR, CANDIDATES, MIN_SHRINK, NOISE_FACTOR, attribute, may_start_processes
 from .confirm import agreement, confirm
-from .localise import localise
+from .joints import _span, diagnose_joints, joint_cut, joint_pressures
+from .localise import _windows, localise
 
 MIN_TRAVEL = 1e-3     #: [m] a recording whose piston moves less than this cannot be judged
 
@@ -48,6 +52,11 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
     default: identified here.  ``machine``: a ``machine.MachineFile`` the recordings are of
     (default: their sidecars, else the reference rig, which is then said).
 
+    The machine is the recordings' (their kind, as ``identify`` reads it): the boom rig
+    (one joint) is judged whole, as below; a machine of several joints (the whole
+    excavator's recordings) joint by joint (:func:`_diagnose_joints`,
+    ``diagnose.joints``), which refuses ``ssp`` and ``propose`` (the boom's) naming them.
+
     Where the two most probable explanations are close (``propose.ambiguous``), the
     experiment that would tell them apart is proposed (``doc["next_experiment"]``, its
     predictions in ``next_experiment.png``, shown in the report); ``propose``: a path to
@@ -58,6 +67,8 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
     if not hold_paths:
         raise ValueError("diagnose needs at least one holdout recording (--holdout): shrink is measured there")
     out = Path(out_dir)
+    if common_kind([*fit_paths, *hold_paths]) == "excavator":      # a machine of several joints: per joint
+        return _diagnose_joints(fit_paths, hold_paths, out, workers, ssp, say, baseline, machine, propose)
     fit_recs = read_checked(fit_paths, role="fit recording", machine=machine)
     hold_recs = read_checked(hold_paths, role="holdout", machine=machine)
     assumed = assumption(fit_recs + hold_recs, machine)
@@ -260,6 +271,8 @@ def action_sentence(doc: dict) -> str:
     if not verdict:
         return ("Nothing the recordings can show: the gap lies within what the baseline's own uncertainty leaves "
                 "open; record longer or livelier motion (starts, reversals, runs to the ends) to narrow it.")
+    if any("@" in v for v in verdict):          # a machine of several joints: "<effect>@<joint>"
+        return _joints_action(doc)
     if verdict == ["unexplained"]:
         w = (doc.get("where") or [{}])[0]
         place = (f", mostly in {w['channel']} during {w['regime'].replace('_', ' ')} ({w['subsystem']})"
@@ -273,6 +286,32 @@ def action_sentence(doc: dict) -> str:
     advice = "; ".join(EFFECTS[v].advice for v in verdict if v in EFFECTS and EFFECTS[v].advice)
     return f"Most likely cause: {named}{how}. {advice[:1].upper() + advice[1:]}." if advice else \
         f"Most likely cause: {named}{how}."
+
+
+def _joints_action(doc: dict) -> str:
+    """:func:`action_sentence` for the findings per joint (``<effect>@<joint>``,
+    ``unexplained@<joint>``): each named effect on its joint with what it removes of that
+    joint's holdout gap and the catalogue's advice; the joints no candidate explains,
+    where their gap lies."""
+    from ..model import EFFECTS
+    named, unexplained = [], []
+    for v in doc["verdict"]:
+        name, joint = v.rsplit("@", 1)
+        (unexplained if name == "unexplained" else named).append((name, joint))
+    parts = []
+    for name, joint in named:
+        shrink = next((c.get("shrink") for c in doc.get("effects", []) if c.get("named") and c.get("joint") == joint
+                       and name in c.get("name", "").split("+")), None)
+        how = f" (it removes {100 * shrink:.0f} % of that joint's gap on the holdout)" if shrink is not None else ""
+        advice = EFFECTS[name].advice if name in EFFECTS else ""
+        parts.append(f"{name} on the {joint}{how}" + (f": {advice}" if advice else ""))
+    text = f"Most likely cause: {'; '.join(parts)}." if parts else ""
+    for joint in unexplained:
+        w = next((w for w in doc.get("where", []) if w.get("joint") == joint[1]), {})
+        place = f", mostly in {w['channel']} ({w['subsystem']})" if w else ""
+        text += (f"{' ' if text else ''}The model misses something on the {joint[1]} that none of its candidate "
+                 f"effects explains{place}: inspect that joint and record it again.")
+    return text
 
 
 def _number(v) -> str:
@@ -328,6 +367,26 @@ def _img(name: str, embedded: dict | None) -> str:
     return f'<p><img src="{src}" alt="{e(name)}" title="{e(name)}" style="max-width:100%"></p>'
 
 
+def _params_table(base: dict) -> str:
+    """The baseline's parameters: value, 95 % interval, unit (and, where the
+    identification says so, why it cannot tell one)."""
+    e = html.escape
+    ci, units = base.get("ci95") or {}, base.get("units") or {}
+    why = base.get("cannot_tell")
+    params = "".join(
+        f"<tr><td>{e(k)}</td><td>{_number(v)}</td>"
+        f"<td>{(_number(ci[k][0]) + ' to ' + _number(ci[k][1])) if k in ci else '&ndash;'}</td>"
+        f"<td>{_unit(units.get(k, ''))}</td>" + (f"<td>{e(why.get(k, ''))}</td>" if why is not None else "")
+        + "</tr>" for k, v in (base.get("params") or {}).items())
+    return ("<table><tr><th>parameter</th><th>value</th><th>95 % interval</th><th>unit</th>"
+            + ("<th>cannot tell</th>" if why is not None else "") + f"</tr>{params}</table>") if params else ""
+
+
+#: the report page's style (the boom's and a machine's of several joints alike)
+_STYLE = """<style>body{font-family:sans-serif;max-width:980px;margin:2em auto}table{border-collapse:collapse}
+td,th{border:1px solid #ccc;padding:4px 8px;font-size:13px}.act{font-size:1.3em;background:#eef4fa;padding:.6em}</style>"""
+
+
 def _html(doc: dict, images: list[str], embedded: dict | None = None) -> str:
     """The report: one sentence to act on, the verdict, the parameters with units and
     intervals, the candidates as a bar chart, the overlays, where the gap lies.  With
@@ -370,13 +429,7 @@ def _html(doc: dict, images: list[str], embedded: dict | None = None) -> str:
         f"<td>{100 * w['share']:.1f} %</td><td>{e(', '.join(f'{a:.2f} to {b:.2f}' for a, b in w['windows']))}</td></tr>"
         for w in doc.get("where", []))
     base = doc.get("baseline") or {}
-    ci, units = base.get("ci95") or {}, base.get("units") or {}
-    params = "".join(
-        f"<tr><td>{e(k)}</td><td>{_number(v)}</td>"
-        f"<td>{(_number(ci[k][0]) + ' to ' + _number(ci[k][1])) if k in ci else '&ndash;'}</td>"
-        f"<td>{_unit(units.get(k, ''))}</td></tr>" for k, v in (base.get("params") or {}).items())
-    params = ("<table><tr><th>parameter</th><th>value</th><th>95 % interval</th><th>unit</th></tr>"
-              f"{params}</table>") if params else ""
+    params = _params_table(base)
     before = " / ".join(f"{100 * v:.3f} %" for v in (base.get("nrmse_holdout") or {}).values())
     warnings = "".join(f"<li>{e(w)}</li>" for w in base.get("warnings") or [])
     warnings = f"<p><b>Warnings of the baseline's identification:</b></p><ul>{warnings}</ul>" if warnings else ""
@@ -387,8 +440,7 @@ def _html(doc: dict, images: list[str], embedded: dict | None = None) -> str:
     spread = ", ".join(f"{e(k)} {100 * v:.3f} %" for k, v in (doc.get("baseline_spread") or {}).items())
     conf = _confirmation_html(doc.get("confirmation"))
     return f"""<!doctype html><html><head><meta charset="utf-8"><title>boomfmi diagnosis</title>
-<style>body{{font-family:sans-serif;max-width:980px;margin:2em auto}}table{{border-collapse:collapse}}
-td,th{{border:1px solid #ccc;padding:4px 8px;font-size:13px}}.act{{font-size:1.3em;background:#eef4fa;padding:.6em}}</style>
+{_STYLE}
 </head><body>
 <h1>Diagnosis of the sim-to-real gap</h1>
 <p class="act">{e(action_sentence(doc))}</p>
@@ -436,6 +488,11 @@ def _confirmation_html(c: dict | None) -> str:
     e = html.escape
     if "skipped" in c or "error" in c:
         return f"<h2>Confirmation through the FMUs</h2><p>Not done: {e(c.get('skipped') or c.get('error'))}.</p>"
+    if "shrink_by_joint" in c:                  # a machine of several joints (confirm.confirm_machine)
+        rows = "".join(f"<tr><td>{e(j)}</td><td>{v:.3f}</td></tr>" for j, v in c["shrink_by_joint"].items())
+        return (f"<h2>Confirmation through the FMUs</h2><p>{e(Path(c['ssp']).name)} on {e(Path(c['recording']).name)} "
+                f"with the named effects: holdout shrink {c['shrink']:.3f} over the joints with effects.</p>"
+                f"<table><tr><th>joint</th><th>shrink</th></tr>{rows}</table>")
     pct = lambda d: " / ".join(f"{100 * d[k]:.3f} %" for k in CHANNELS)
     text = (f"<h2>Confirmation through the FMUs</h2><p>The holdout recording through {e(c['ssp'])} "
             f"(co-simulated at 1 ms): baseline NRMSE p_a / p_b / x {pct(c['nrmse_holdout_baseline'])}")
@@ -446,4 +503,339 @@ def _confirmation_html(c: dict | None) -> str:
     return text + ".</p>"
 
 
-__all__ = ["MIN_TRAVEL", "diagnose", "OUTPUTS", "action_sentence"]
+# ------------------------------------------------------------- a machine of several joints
+#: what ``diagnosis.json`` says of the per-joint diagnosis (``"note"``)
+JOINTS_NOTE = ("Each joint is cut off the linkage: its valve and chambers run on the recorded command and measured "
+               "motion (the pneumatic cut), and where the load cut is installed its load runs on the measured "
+               "pressures and the other joints' measured motion, re-identified on the fit recordings. The candidates "
+               "are fitted on the fit recordings' cuts and scored on the holdouts'. The whole machine's baseline "
+               "identified on the fit recordings is reported with its error on each holdout; the cuts do not use it.")
+
+
+def _diagnose_joints(fit_paths, hold_paths, out: Path, workers, ssp, say, baseline, machine, propose) -> dict:
+    """:func:`diagnose` on the recordings of a machine of several joints (the whole
+    excavator's), joint by joint (``diagnose.joints``: each joint cut off the linkage,
+    a pneumatic cut and a load cut); writes ``out``'s ``diagnosis.json`` and
+    ``report.html`` as one set and returns the JSON document.
+
+    ``diagnosis.json`` follows the boom's (``shared/spec/diagnosis-report.md``) with
+    these additions: ``"kind": "excavator"``; ``baseline``: ``params``, ``ci95``,
+    ``units``, ``cannot_tell``, ``nrmse_holdout`` per joint and channel (the holdouts'
+    mean) and per recording, ``warnings``, ``used_by_verdict`` (false: the cuts do not
+    use it); ``where``: one entry per joint and holdout, the most beyond its threshold
+    first: ``joint``, ``recording``, ``channel`` (the joint's pressure with the larger
+    error) and ``channel_gaps``, ``regime`` (``whole_recording``), ``subsystem``
+    (``valve_<joint>, cylinder_<joint>``), ``share`` (the joint's part of the holdout's
+    squared normalised pressure residual over all joints), ``gap``, ``noise_floor``,
+    ``threshold``, ``flagged``, ``exercised`` (the piston moved ``MIN_TRAVEL`` or its
+    valve opened), ``travel_mm``, ``finding``, ``windows`` (the three 50 ms spans where
+    the cut's residual is largest), ``position`` (the load cut's, where it runs);
+    ``effects``: every candidate fitted on a flagged joint, best first per joint and
+    cut: ``name`` (``a+b`` for a pair), ``joint``, ``cut``, ``params``, ``law``,
+    ``fit_gap`` (and ``fit_gap_before``), ``gap_before`` and ``gap_after`` on the
+    holdouts (and per holdout), ``shrink``, ``named``, ``not_fitted`` (why); ``verdict``:
+    ``"<effect>@<joint>"`` or ``"unexplained@<joint>"``, the joint furthest beyond its
+    threshold first, ``[]`` where no joint's cut exceeds its noise; ``confirmation``: the
+    named effects through ``excavator.ssp`` (``confirm.confirm_machine``)."""
+    refused = [f"{option} ({what})" for option, what, given in (
+        ("--ssp", "the boom's SSP for confirming a one-joint verdict; a machine of several joints is confirmed "
+                  "through build/excavator.ssp", ssp is not None),
+        ("--propose", "the boom's next experiment; the per-joint diagnosis proposes none", propose is not None))
+        if given]
+    if refused:
+        raise ValueError("the whole excavator's recordings are diagnosed joint by joint, which cannot honour "
+                         + "; ".join(refused) + ": leave it out")
+    fit_recs = read_checked(fit_paths, "excavator", "fit recording", machine=machine)
+    hold_recs = read_checked(hold_paths, "excavator", "holdout", machine=machine)
+    check_no_duplicates(fit_recs)
+    check_no_duplicates(hold_recs, "holdout")
+    for h in hold_recs:
+        check_distinct(fit_recs, h)
+    check_same_rig([*fit_recs, *hold_recs])
+
+    say(f"identifying the baseline per joint on {len(fit_recs)} fit recording(s) (reported; the per-joint cuts "
+        f"do not use it)")
+    if baseline is None:
+        result, _, ex = identify_recs(fit_recs)
+    else:
+        result, _ = baseline() if callable(baseline) else baseline
+        ex = machine_of(fit_recs[0]).ex           # the linkage identify_recs assumes
+    for w in result.warnings:
+        say(f"warning (baseline): {w}")
+    bound, notes = ssv_values(result, ex)
+    linkage, payload = bound_machine(bound, ex)
+    per_hold = {}
+    for h in hold_recs:
+        say(f"simulating the identified machine on {h.path}")
+        per_hold[str(h.path)] = joint_nrmse(simulate_machine(h, linkage, payload), h, linkage)
+    why = cannot_tell(result)
+    base = {"params": {k: e.value for k, e in result.params.items()},
+            "ci95": {k: [float(z) if np.isfinite(z) else None for z in e.ci95] for k, e in result.params.items()},
+            "units": {k: e.unit for k, e in result.params.items()},
+            "cannot_tell": {k: v for k, v in why.items() if v},
+            "nrmse_holdout": {j: {c: float(np.mean([per_hold[p][j][c] for p in per_hold]))
+                                  for c in ("x", "p_a", "p_b")} for j in JOINTS},
+            "nrmse_holdout_by_recording": per_hold,
+            "warnings": [*result.warnings, *notes],
+            "used_by_verdict": False}
+
+    hx = machine_for(hold_recs[0], ex)
+    say(f"cutting each joint off the linkage, fitting the candidates on the {len(fit_recs)} fit recording(s) and "
+        f"scoring them on the {len(hold_recs)} holdout(s) (this is the long part)")
+    found = diagnose_joints(fit_recs, hold_recs, hx, workers=workers, progress=say)
+    where, effects, figures = [], [], []
+    named = {j: _named_candidate(f) for j, f in found.joints.items()}
+    for k, h in enumerate(hold_recs):
+        travel = np.ptp(measured_pistons(h, hx), axis=0)
+        curves, entries, squares = {}, [], {}
+        for i, j in enumerate(JOINTS):
+            f = found.joints[j]
+            cut = joint_cut(h, j, hx)
+            pa, pb = joint_pressures(cut, j, hx)
+            best = named[j]
+            after = joint_pressures(cut, j, hx, best.params) if best else None
+            curves[j] = (cut, pa, pb, after, best)
+            # as the cut's gap compares them (each pressure as its sensor reads it)
+            ea, eb = ((as_sensed(m, s) - m) / _span(m) for m, s in ((cut.p_a_raw, pa), (cut.p_b_raw, pb)))
+            squares[j] = float(np.sum(ea ** 2 + eb ** 2))
+            gaps = {f"p_a_{j}": float(np.sqrt(np.mean(ea ** 2))), f"p_b_{j}": float(np.sqrt(np.mean(eb ** 2)))}
+            u = h.data[f"u_{j}"].to_numpy(float)
+            opened = bool(np.any(np.abs(u - reference_rig.u_centre) > 0.5))
+            pc = f.pressures
+            entry = {"joint": j, "recording": str(h.path), "channel": max(gaps, key=gaps.get),
+                     "channel_gaps": gaps, "regime": "whole_recording",
+                     "subsystem": f"valve_{j}, cylinder_{j}", "gap": pc.gaps[k], "noise_floor": pc.noises[k],
+                     "threshold": pc.thresholds[k], "flagged": pc.gaps[k] > pc.thresholds[k],
+                     "exercised": bool(travel[i] >= MIN_TRAVEL or opened), "travel_mm": float(1e3 * travel[i]),
+                     "finding": ", ".join(f.verdict) or None,
+                     "windows": _windows(cut.t, ea ** 2 + eb ** 2, np.ones(len(cut.t), bool))}
+            lc = f.position
+            if lc is not None:
+                entry["position"] = {"gap": lc.gaps[k], "noise_floor": lc.noises[k], "threshold": lc.thresholds[k],
+                                     "flagged": lc.gaps[k] > lc.thresholds[k], "subsystem": f"linkage ({j})",
+                                     "finding": ", ".join(lc.verdict) or None,
+                                     "gap_own_load": lc.own_gaps[k] if lc.own_gaps else None,
+                                     "spread_of_the_load": lc.spreads[k] if lc.spreads else None,
+                                     "model_error": lc.model_error}
+            entries.append(entry)
+        total = sum(squares.values())
+        for entry in entries:
+            entry["share"] = squares[entry["joint"]] / total if total > 0 else 0.0
+        where += entries
+        figures.append((str(h.path), _joints_figure(h, curves)))
+    for j, f in found.joints.items():
+        for cut in f.cuts:
+            for c in cut.candidates:
+                is_named = any(cut is n for n in f.named_cuts) and c is cut.candidates[0]
+                effects.append(_joint_effect(j, cut, c, is_named))
+    where.sort(key=lambda w: -(w["gap"] - w["threshold"]) / w["threshold"])
+    doc = {"kind": "excavator",
+           "judgeable": True,
+           "method": "per-joint cuts, fitted on the fit recordings and scored on the holdouts "
+                     "(boomfmi.diagnose.joints)",
+           "note": JOINTS_NOTE,
+           "fit_recordings": [str(r.path) for r in fit_recs],
+           "holdout_recordings": [str(h.path) for h in hold_recs],
+           "baseline": base,
+           "noise_factor": NOISE_FACTOR, "abs_floor": ABS_FLOOR, "min_shrink": MIN_SHRINK,
+           "where": where,
+           "effects": effects,
+           "verdict": found.verdict,
+           "warnings": list(found.notes)}
+    confirmation = _confirm_joints(found, bound, hold_recs, say)
+    if confirmation is not None:
+        doc["confirmation"] = confirmation
+    doc = plain(doc)
+    with OutputSet(out, stale=OUTPUTS) as files:
+        files.path("report.html").write_text(_joints_html(doc, figures))
+        files.path("diagnosis.json").write_text(dumps(doc, indent=2))
+    return doc
+
+
+def _named_candidate(f):
+    """The pneumatic cut's named candidate of a joint (single or pair), or None."""
+    c = f.pressures
+    if c.verdict and c.verdict != ["unexplained"] and c.candidates:
+        return c.candidates[0]
+    return None
+
+
+def _joint_effect(joint: str, cut, c, named: bool) -> dict:
+    """One candidate fitted on a joint's cut as ``diagnosis.json`` lists it."""
+    entry = {"name": c.name, "joint": joint, "cut": cut.kind,
+             "params": c.params.get(c.name, {}) if "+" not in c.name else c.params,
+             "law": {n: sorted(q) for n, q in c.params.items()},
+             "fit_gap": c.fit_gap, "fit_gap_before": cut.fit_gap,
+             "gap_before": cut.gap, "gap_after": float(np.mean(c.hold_gaps)) if c.hold_gaps else None,
+             "holdout_gaps_before": list(cut.gaps), "holdout_gaps_after": list(c.hold_gaps),
+             "shrink": c.shrink if c.not_fitted is None else None, "named": named}
+    if c.values is not None:
+        entry["values"] = c.values
+    if c.not_fitted is not None:
+        entry["not_fitted"] = c.not_fitted
+    return entry
+
+
+def _confirm_joints(found, values: dict, hold_recs, say):
+    """The named effects through ``excavator.ssp`` (``confirm.confirm_machine``) on the
+    first holdout: the baseline's ``values`` (the SSV's), and with each joint's named
+    effects, a friction effect's joint with the load it was re-identified with.  None
+    where no effect is named; where the SSP cannot run them, the reason."""
+    from ..physics import ParameterError
+    from .confirm import confirm_machine
+    effects_by_joint, effect_values = {}, dict(values)
+    for j, f in found.joints.items():
+        for cut in f.named_cuts:
+            if cut.candidates:
+                best = cut.candidates[0]
+                effects_by_joint.setdefault(j, {}).update(best.params)
+                if best.values:
+                    effect_values.update({f"{k}_{j}": float(v) for k, v in best.values.items()
+                                          if k in ("K_v", "F_s", "F_d")})
+    if not effects_by_joint:
+        return None
+    say(f"confirming the named effects through excavator.ssp on {hold_recs[0].path}")
+    try:
+        return confirm_machine(values, effects_by_joint, hold_recs[0], effect_values=effect_values)
+    except (ParameterError, ValueError, RuntimeError, OSError) as e:
+        return {"effects": effects_by_joint, "skipped": f"the SSP could not run the named effects: {e}"}
+
+
+def _joints_figure(h, curves) -> str:
+    """Each joint's recorded pressures, the cut's and (on a named finding) the cut's with
+    that effect, as a PNG in base64."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(len(JOINTS), 2, sharex=True, figsize=(10, 9))
+    for i, j in enumerate(JOINTS):
+        cut, pa, pb, after, best = curves[j]
+        P_atm = h.P_atm
+        for k, (q, m, s) in enumerate((("p_a", cut.p_a_raw, pa), ("p_b", cut.p_b_raw, pb))):
+            ax = axes[i, k]
+            ax.plot(cut.t, (m - P_atm) / 1e5, lw=0.8, color="k", label="holdout recording")
+            ax.plot(cut.t, (s - P_atm) / 1e5, lw=1.0, label="cut, no effect")
+            if after is not None:
+                ax.plot(cut.t, (after[k] - P_atm) / 1e5, lw=1.0, label=f"with {best.name}")
+            ax.set_ylabel(f"{j}\n{q} [bar gauge]" if k == 0 else f"{q} [bar gauge]")
+            if i == 0 or after is not None:
+                ax.legend(loc="best", fontsize=7)
+    for k in range(2):
+        axes[-1, k].set_xlabel("t [s]")
+    fig.suptitle(f"{Path(h.path).name}: each joint's pressures, recorded and from its cut")
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, dpi=90, format="png")
+    plt.close(fig)
+    return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _pct(v) -> str:
+    return f"{100 * v:.2f} %"
+
+
+def _joints_html(doc: dict, figures) -> str:
+    """The report of a machine of several joints: the page of :func:`_html` (one
+    sentence to act on first, the findings, the parameters with units and intervals,
+    the overlays embedded) with a section per joint."""
+    e = html.escape
+    verdict = doc["verdict"]
+    if not verdict:
+        headline = "No joint's gap exceeds its noise: the model's pneumatics explain every joint."
+    else:
+        headline = "Findings: " + ", ".join(f"<b>{e(v)}</b>" for v in verdict)
+    where = "".join(
+        f"<tr><td>{e(w['joint'])}</td><td>{e(Path(w['recording']).name)}</td><td>{_pct(w['gap'])}</td>"
+        f"<td>{_pct(w['noise_floor'])}</td><td>{_pct(w['threshold'])}</td>"
+        f"<td>{'yes' if w['flagged'] else 'no'}</td><td>{e(w['finding'] or '')}</td>"
+        f"<td>{e(w['channel'])}</td><td>{100 * w['share']:.1f} %</td>"
+        f"<td>{'yes' if w['exercised'] else 'no'} ({w['travel_mm']:.1f} mm)</td>"
+        f"<td>{e(', '.join(f'{a:.2f} to {b:.2f}' for a, b in w['windows']))}</td></tr>" for w in doc["where"])
+    effects = "".join(
+        f"<tr><td>{e(c['joint'])}</td><td>{e(c['cut'])}</td><td>{e(c['name'])}{' (named)' if c['named'] else ''}</td>"
+        + (f"<td colspan=\"5\">not fitted: {e(c['not_fitted'])}</td></tr>" if c.get("not_fitted") else
+           f"<td>{_params_text(c['name'].replace('+', ' + '), c['params'])}</td>"
+           f"<td>{_pct(c['fit_gap_before'])} &rarr; {_pct(c['fit_gap'])}</td>"
+           f"<td>{_pct(c['gap_before'])}</td><td>{_pct(c['gap_after'])}</td><td>{c['shrink']:.3f}</td></tr>")
+        for c in doc["effects"]) or \
+        '<tr><td colspan="8">none: no joint was flagged</td></tr>'
+    b = doc["baseline"]
+    nrmse = "".join(f"<tr><td>{e(j)}</td>" + "".join(f"<td>{_pct(r[c])}</td>" for c in ("x", "p_a", "p_b"))
+                    + "</tr>" for j, r in b["nrmse_holdout"].items())
+    warnings = "".join(f"<li>{e(w)}</li>" for w in [*doc["warnings"], *b["warnings"]])
+    warnings = f"<h2>Warnings</h2><ul>{warnings}</ul>" if warnings else ""
+    imgs = "".join(f'<h3>{e(Path(p).name)}</h3><p><img src="data:image/png;base64,{png}" '
+                   f'alt="pressures of {e(Path(p).name)}" style="max-width:100%"></p>' for p, png in figures)
+    return f"""<!doctype html><html><head><meta charset="utf-8"><title>boomfmi diagnosis: per joint</title>
+{_STYLE}
+</head><body>
+<h1>Diagnosis of the sim-to-real gap, per joint</h1>
+<p class="act">{e(action_sentence(doc))}</p>
+<p>{headline}</p>
+<p>Fit recordings: {e(', '.join(doc['fit_recordings']))}. Holdout recordings: {e(', '.join(doc['holdout_recordings']))}.</p>
+<h2>Baseline</h2><p>{e(doc['note'])}</p>{_params_table(b)}
+<p>The identified machine (monolithic reference, from each holdout's first state) against the holdouts, NRMSE:</p>
+<table><tr><th>joint</th><th>x</th><th>p_a</th><th>p_b</th></tr>{nrmse}</table>
+<h2>Where: each joint's gap</h2>
+<p>Each joint's valve and chambers run on its recorded command and its measured motion (the linkage cut off), so a
+pressure gap that remains is that joint's own (and, where the load cut is installed, its load on the measured pressures
+and the other joints' measured motion: a position gap). The gap is the NRMSE of its two pressures, summed; a joint is
+flagged beyond {doc['noise_factor']:g} times its noise floor plus {100 * doc['abs_floor']:g} %. On a flagged joint each
+candidate of the cut is fitted on the fit recordings and scored on the holdouts; the best is named if it removes at
+least {100 * doc['min_shrink']:.0f} % of the holdouts' gap (or a pair, each paying for itself), else "unexplained".</p>
+<table><tr><th>joint</th><th>holdout</th><th>gap</th><th>noise floor</th><th>threshold</th><th>flagged</th>
+<th>finding</th><th>larger error</th><th>share</th><th>exercised (travel)</th><th>windows [s]</th></tr>{where}</table>
+<h2>Candidate effects on the flagged joints</h2>
+<p>Fitted on the fit recordings' cuts (their gap before &rarr; after), scored on the holdouts' (never fitted on).</p>
+<table><tr><th>joint</th><th>cut</th><th>effect</th><th>fitted parameters</th><th>fit gap</th><th>holdout gap before</th>
+<th>holdout gap after</th><th>holdout shrink</th></tr>{effects}</table>
+<h2>Before and after: pressures, recorded and from each joint's cut</h2>{imgs}
+{_confirmation_html(doc.get("confirmation"))}
+{warnings}
+</body></html>"""
+
+
+def summary_lines(doc: dict) -> list[str]:
+    """The human summary ``boomfmi diagnose`` prints for a machine of several joints:
+    the baseline's holdout error, each joint's gap against its noise, the findings, the
+    verdict and the sentence to act on."""
+    lines = []
+    b = doc["baseline"]
+    lines.extend(f"warning (baseline): {w}" for w in b["warnings"])
+    lines.append("baseline (identified on the fit recordings; the per-joint cuts do not use it): holdout NRMSE "
+                 "x / p_a / p_b: " + "; ".join(f"{j} {100 * r['x']:.2f} / {100 * r['p_a']:.2f} / {100 * r['p_b']:.2f} %"
+                                              for j, r in b["nrmse_holdout"].items()))
+    effects = {}
+    for c in doc["effects"]:           # the named (else the best) candidate of each joint
+        if c.get("not_fitted") is None and (c["named"] or c["joint"] not in effects):
+            if c["named"] or c["cut"] == "pressures":
+                effects[c["joint"]] = c
+    for rec in doc["holdout_recordings"]:
+        lines.append(f"holdout {rec}: each joint's gap (NRMSE of p_a + p_b) against its threshold:")
+        for j in JOINTS:
+            w = next(w for w in doc["where"] if w["joint"] == j and w["recording"] == rec)
+            text = (f"  {j:7s}gap {_pct(w['gap']):>8s} (noise floor {_pct(w['noise_floor'])}, threshold "
+                    f"{_pct(w['threshold'])})")
+            pos = w.get("position")
+            if pos:
+                text += f"; position {_pct(pos['gap'])} (threshold {_pct(pos['threshold'])})"
+            if w["flagged"] or (pos and pos["flagged"]):
+                c = effects.get(j)
+                text += f"  FLAGGED: {w['finding']}"
+                if c:
+                    flat = {k: v for k, v in c["params"].items() if not isinstance(v, dict)} or \
+                        {f"{n}.{k}": v for n, q in c["params"].items() for k, v in q.items()}
+                    text += (f" (best candidate {c['name']}: holdout shrink {c['shrink']:.2f}, "
+                             + ", ".join(f"{k} = {v:.3g}" for k, v in flat.items()) + ")")
+            lines.append(text)
+    lines.extend(f"warning: {w}" for w in doc["warnings"])
+    c = doc.get("confirmation")
+    if c:
+        lines.append(f"confirmation through {c.get('ssp', 'excavator.ssp')}: "
+                     + (f"skipped: {c['skipped']}" if "skipped" in c else f"holdout shrink {c['shrink']:.2f}"))
+    lines.append(f"verdict: {doc['verdict']}")
+    lines.append(action_sentence(doc))
+    return lines
+
+
+__all__ = ["MIN_TRAVEL", "diagnose", "OUTPUTS", "action_sentence", "summary_lines"]

@@ -69,7 +69,7 @@ SSP_COMPONENT = "linkage"
 #: Step of the identified machine's simulation [s] (see the module's docstring).
 H = 5e-4
 #: The least span a channel's error is measured over: a piston that barely moves is
-#: judged against 1 mm, a chamber against half a bar (``diagnose.excavator.P_SPAN_MIN``).
+#: judged against 1 mm, a chamber against half a bar (``diagnose.joints.P_SPAN_MIN``).
 X_SPAN_MIN = 1e-3
 P_SPAN_MIN = 5e4
 #: The start state is the mean over this first stretch of the recording [s].

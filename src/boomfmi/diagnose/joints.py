@@ -1,4 +1,9 @@
-"""Diagnosis per joint of the whole excavator: which joint, which effect, how far it shrinks.
+"""A joint judged apart from the linkage: the diagnosis of a machine of several joints
+(the whole excavator), per joint: which joint, which effect, how far it shrinks.
+
+``diagnose.report.diagnose`` runs it for a machine of more than one joint (the boom rig,
+one joint, is judged whole by ``diagnose.attribute``: with one joint the whole model is
+the cut) and writes its report.
 
 **Two cuts per joint.**  Each joint is judged apart from the linkage, measured signals
 in place of its neighbours':
@@ -311,7 +316,7 @@ class JointFinding:
 
 
 @dataclass
-class ExcavatorDiagnosis:
+class JointsDiagnosis:
     joints: dict                #: joint -> JointFinding
     verdict: list               #: "<effect>@<joint>" (or "unexplained@<joint>")
     notes: list = field(default_factory=list)
@@ -580,16 +585,16 @@ def _frames(recs) -> list:
     return list(recs)
 
 
-def diagnose_excavator(fit, hold, ex: exc.Excavator = exc.Excavator(), joints=exc.JOINTS,
-                       workers: int | None = None, progress=None) -> ExcavatorDiagnosis:
+def diagnose_joints(fit, hold, ex: exc.Excavator = exc.Excavator(), joints=exc.JOINTS,
+                    workers: int | None = None, progress=None) -> JointsDiagnosis:
     """Localise the gap per joint and cut, and attribute it (see the module's docstring).
-    ``fit``, ``hold``: excavator recordings (``recording.Recording`` or DataFrames,
+    ``fit``, ``hold``: recordings of the linkage ``ex`` (``recording.Recording`` or DataFrames,
     pressures gauge; one or a list each): candidates are fitted on ``fit``, scored and
     flagged on ``hold``.  ``workers``: processes at once (default: one per core)."""
     say = progress or (lambda text: None)
     fit, hold = _frames(fit), _frames(hold)
     if not fit or not hold:
-        raise ValueError("the excavator's diagnosis needs at least one fit and one holdout recording")
+        raise ValueError("the per-joint diagnosis needs at least one fit and one holdout recording")
     workers = workers or os.cpu_count() or 1
     jl, load_note = _load_module()
     notes = [load_note] if load_note else []
@@ -662,10 +667,10 @@ def diagnose_excavator(fit, hold, ex: exc.Excavator = exc.Excavator(), joints=ex
     order = sorted((f for f in findings.values() if f.flagged),
                    key=lambda f: -max(c.excess for c in f.cuts if c.flagged))
     verdict = [f"{name}@{f.joint}" for f in order for name in f.verdict]
-    return ExcavatorDiagnosis(findings, verdict, notes)
+    return JointsDiagnosis(findings, verdict, notes)
 
 __all__ = [
     "PNEUMATIC_STAGES", "LOAD_STAGES", "candidates", "joint_forms", "joint_cut", "joint_model",
     "P_SPAN_MIN", "joint_noise", "threshold", "unlagged", "joint_pressures", "joint_gap", "Fitted",
-    "CutFinding", "JointFinding", "ExcavatorDiagnosis", "diagnose_excavator",
+    "CutFinding", "JointFinding", "JointsDiagnosis", "diagnose_joints",
 ]
