@@ -29,6 +29,29 @@ def test_valve_dynamics_lags_the_opening(fmu):
         assert valve.get("mdot_a")["mdot_a"] == pytest.approx(choked(reference_rig.A_max * (5 - y) / 5), rel=1e-9)
 
 
+def test_a_speed_limited_spool_slews_through_the_fmu(fmu):
+    """rate_spool limits the spool's speed: after 4 ms of a step from 5 V to 1 V it has
+    travelled rate x 4 ms (300 V/s: 1.2 V), not the lag's 4 (1 - 1/e) V."""
+    tau, rate, dt = 0.004, 300.0, 0.004
+    with FmuInstance(fmu("valve")) as valve:
+        valve.initialize(dict(tau_spool=tau, rate_spool=rate), inputs=dict(u=5.0, p_a=1.5e5, p_b=1.5e5))
+        valve.set(u=1.0)
+        valve.step_to(0.0, dt)
+        y = 5.0 - rate * dt
+        assert valve.get("mdot_a")["mdot_a"] == pytest.approx(choked(reference_rig.A_max * (5 - y) / 5), rel=1e-9)
+
+
+def test_a_spool_starts_at_the_first_command_where_the_host_sets_none_in_initialisation(fmu):
+    """fmpy's, libcosim's and our SSP masters leave every input at its start value
+    through initialisation and hand the first command with the first step: the spool
+    starts there (as the reference's does), not at the start value's 5 V."""
+    with FmuInstance(fmu("valve")) as valve:
+        valve.initialize(dict(tau_spool=0.004))              # no input given in initialisation
+        valve.set(u=1.0, p_a=1.5e5, p_b=1.5e5)
+        valve.step_to(0.0, 1e-3)
+        assert valve.get("mdot_a")["mdot_a"] == pytest.approx(choked(reference_rig.A_max * 4 / 5), rel=1e-9)
+
+
 def test_valve_deadband_closes_small_commands(fmu):
     with FmuInstance(fmu("valve")) as valve:
         valve.initialize(dict(deadband=0.3), inputs=dict(u=5.0, p_a=1.5e5, p_b=1.5e5))

@@ -29,6 +29,32 @@ def test_spool_lag_is_exact_first_order():
     assert y == pytest.approx(1.0 + 4.0 * math.exp(-0.01 / tau), rel=1e-12)
 
 
+def test_a_speed_limited_spool_slews_then_lags_and_matches_its_ode():
+    """The closed form against its ODE dy/dt = clip((u - y) / tau, -rate, rate) (fine
+    Euler), from any point: the spool slews at ``rate`` until within rate tau of u."""
+    tau, rate, u = 0.004, 300.0, 1.0
+    y, t_knee = 5.0, (4.0 - rate * tau) / rate          # 4 V to go, slewing down to 1.2 V
+    assert fx.spool_lag_step(y, u, 0.5 * t_knee, tau, rate) == pytest.approx(5.0 - rate * 0.5 * t_knee, rel=1e-12)
+    assert fx.spool_lag_step(y, u, t_knee + tau, tau, rate) == pytest.approx(1.0 + 1.2 * math.exp(-1.0), rel=1e-12)
+    assert fx.spool_rate(y, u, tau, rate) == -rate and fx.spool_rate(1.1, u, tau, rate) == pytest.approx(-25.0)
+    fine, h = 5.0, 1e-6
+    for _ in range(int(0.03 / h)):
+        fine += h * fx.spool_rate(fine, u, tau, rate)
+    step = 5.0
+    for _ in range(30):
+        step = fx.spool_lag_step(step, u, 1e-3, tau, rate)
+    assert step == pytest.approx(fine, abs=1e-4)
+    assert fx.spool_lag_step(5.0, u, 1e-3, tau, 0.0) == fx.spool_lag_step(5.0, u, 1e-3, tau)   # 0: no limit
+
+
+@pytest.mark.parametrize("u, expected", [(4.85, 5.0), (5.35, 5.0), (4.0, 5.0 - 0.8 * 5.0 / 4.8),
+                                         (6.0, 5.0 + 0.6 * 5.0 / 4.6), (0.0, 0.0), (10.0, 10.0)])
+def test_a_band_of_its_own_width_on_each_side_of_the_centre(u, expected):
+    assert fx.deadband_command(u, 0.0, width_ext=0.2, width_ret=0.4) == pytest.approx(expected, rel=1e-12)
+    # a side without its own width keeps the symmetric band's
+    assert fx.deadband_command(5.25, 0.3, width_ext=0.1) == 5.0
+
+
 @pytest.mark.parametrize("u, expected", [(5.2, 5.0), (4.7, 5.0), (0.0, 0.0), (10.0, 10.0),
                                          (2.65, 5.0 - 2.05 * 5.0 / 4.7)])
 def test_deadband_closes_the_centre_and_keeps_the_range(u, expected):

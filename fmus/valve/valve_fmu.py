@@ -11,8 +11,11 @@ outputs depend directly on the inputs.
 
 Unmodelled effects, off by default (``model/catalogue.py``, forms in ``physics/effects.py``): ``tau_spool`` > 0 lets the
 spool follow the command with a first-order lag (valve_dynamics; the spool position is
-then the FMU's state), ``deadband`` > 0 closes a band of commands around 5 V
-(valve_deadband).
+then the FMU's state, starting where the command is as initialisation ends or, if the
+host sets none there, at the first step's),
+``rate_spool`` > 0 limits the spool's speed as well, ``deadband`` > 0 closes a band of
+commands around 5 V (valve_deadband; ``deadband_ext`` and ``deadband_ret`` give each side
+its own width, ``deadband_edge`` rounds its edges).
 """
 from boomfmi_valve_lib.fmislave import (U_MAX, U_MIN, BoomSlave, effect_options, input, option_values, output,
                                        parameter, rig_parameters)
@@ -54,13 +57,16 @@ class Valve(BoomSlave):
         check_gas(gas)
         effects = effects_from_options("valve", option_values(self, "valve"))
         self._boom = Boom(Model(valve=valve, gas=gas, effects=effects), check=False)
-        self._spool = self.u
+        # the spool starts where the command is as initialisation ends; a host that sets
+        # no command there (every connector at its start until the first step: fmpy's and
+        # libcosim's SSP masters, ours) hands it the first with that step, where it starts
+        self._spool = self.u if "u" in self.set_in_initialisation else None
         self._key = None
 
     def _current_flows(self):
         # the flows of the spool's (or the command's) position and the pressures, computed
         # once for each new combination: every output asks for them
-        key = (self._spool if self.tau_spool > 0.0 else self.u, self.p_a, self.p_b)
+        key = (self._spool if self.tau_spool > 0.0 and self._spool is not None else self.u, self.p_a, self.p_b)
         if key != self._key:
             if not (self.p_a >= 0.0 and self.p_b >= 0.0):
                 self.fail(f"input pressures must be >= 0 Pa absolute, got p_a = {self.p_a!r}, p_b = {self.p_b!r}")
@@ -95,4 +101,4 @@ class Valve(BoomSlave):
         return self.p_b
 
     def step(self, t, dt):
-        self._spool = self._boom.spool_step(self._spool, self.u, dt)
+        self._spool = self._boom.spool_step(self.u if self._spool is None else self._spool, self.u, dt)

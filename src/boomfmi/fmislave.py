@@ -238,6 +238,10 @@ class BoomSlave(_FmiSlave):
         self._stepped = False
         self._time_known = False    # whether _time is the start time or a step's end (FMI 3.0 has none before its first step)
         self._fmi_state = _INSTANTIATED
+        #: the Real variables the host set in initialisation mode (an input it did not set
+        #: there holds its start value until the host sets it, typically just before the
+        #: first step: a state that starts from an input waits for it, ``valve``'s spool)
+        self.set_in_initialisation: set = set()
         for var in self.variables:
             owner_attr = getattr(type(self), var.name, None)
             if not isinstance(owner_attr, property):
@@ -295,6 +299,8 @@ class BoomSlave(_FmiSlave):
         if fixed and self._fmi_state >= _STEPPING:
             self._refuse_fixed(fixed, f"{_FMI}SetReal")
             return
+        if self._fmi_state == _INITIALIZING:
+            self.set_in_initialisation.update(names)
         for name, value in zip(names, values):
             setattr(self, name, value)
 
@@ -311,6 +317,8 @@ class BoomSlave(_FmiSlave):
             return values
 
         def set_float64(self, vrs, values):
+            if self._fmi_state == _INITIALIZING:
+                self.set_in_initialisation.update(self._real_names(vrs))
             self._set_checked(super().set_float64, "fmi3SetFloat64", vrs, values)
 
         def set_int32(self, vrs, values):

@@ -28,6 +28,7 @@ UNITS: dict[str, tuple[dict[str, int], dict[str, tuple[float, float]]]] = {
     "N/Pa": ({"m": 2}, {"N/bar": (1e5, 0.0)}),
     "N.s/m": ({"kg": 1, "s": -1}, {}),
     "V": ({"kg": 1, "m": 2, "s": -3, "A": -1}, {}),
+    "V/s": ({"kg": 1, "m": 2, "s": -4, "A": -1}, {}),
     "K": ({"K": 1}, {"degC": (1.0, -273.15)}),
     "J/(kg.K)": ({"m": 2, "s": -2, "K": -1}, {}),
     "rad": ({"rad": 1}, {"deg": (180.0 / math.pi, 0.0)}),

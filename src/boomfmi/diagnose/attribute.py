@@ -12,9 +12,15 @@ and p_b.
   range and the one that screens best on the fit recordings is fitted; a law that
   holds another's parameters and more is grown from that one's fit, where it removes
   ``GROW`` of the fit error (an effect that barely shows cannot tell its shape): its
-  further parameters screened beside it, then all refined together, kept where it
-  fits better (a three-parameter screen is too coarse to find the cushion's narrow
-  valley).
+  further parameters screened beside it, or, where its own screen takes at most
+  ``FRESH_SCREEN`` runs and fits better there, the wider law screened afresh (a lag
+  fitted alone bends to mimic a speed limit, and the limit screened beside that lag
+  finds nothing), then all refined together, kept where it fits better (a
+  three-parameter screen is too coarse to find the cushion's narrow valley) and the
+  holdout bears its further parameters out: predicts it no worse than the narrower law
+  (a speed limit that slow ramps never reach is fitted to whatever else they miss, and
+  the fit recordings alone cannot tell).  The holdout chooses between an effect's laws
+  as the evidence chooses between sets (:mod:`.evidence`), on the same recordings.
 * **Fits.**  An effect's parameters are fitted by output error of the whole model (the
   monolithic reference with the effect on, ``compare.simulate_recording``), each
   channel's residual over its range.  Its range is screened first
@@ -128,6 +134,7 @@ SCREEN = 0.02               #: the share of the fit error a screened point must 
 PAIR_EVALUATIONS = 24       #: the joint fit of a pair: its simplex's evaluations at most
 GROW_EVALUATIONS = 30       #: and of a law grown by further parameters from a narrower law's fit
 GROW = 0.1                  #: the share of the fit error the narrower law must remove to be grown
+FRESH_SCREEN = 9            #: the most runs a wider law's own screen may take (two parameters' grid)
 FRICTION_GAIN = 0.03   #: the share by which a seal-pressure law must lower the load's velocity misfit
 FRICTION_CLEAR = 0.25  #: and how far its coefficient's interval keeps from zero (its lower end / value)
 RTOL = 1e-5            #: the reference solver's tolerance when scoring
@@ -280,24 +287,38 @@ def _fit_and_score(args):
     laws = lambda form: {q[0] for q in form}
     # every law that holds no other's parameters screened, the one that screens best
     # refined; then a law that holds its parameters and more (a leak both laminar and
-    # turbulent, a cushion with its port's volume) grown from that fit: its further
-    # parameters screened beside it, then all refined together, kept where it fits better
+    # turbulent, a cushion with its port's volume, a spool's lag with a speed limit)
+    # grown from that fit: its further parameters screened beside it, or the wider law
+    # screened afresh where that fits better (the narrower law's fit bends to mimic the
+    # wider one's shape: a slower lag for a speed limit), then all refined together,
+    # kept where it fits better and the holdout bears it out (a speed limit the fit
+    # recordings never reach is fitted to whatever else they miss)
     simple = [f for f in forms if not any(laws(g) < laws(f) for g in forms)]
     screens = [(*fit_effects([name], values, fit_recs, fixed=fixed, forms={name: form}, screen_only=True), form)
                for form in simple]
     fx, cost, form = min(screens, key=lambda f: f[1])
     fx, cost = fit_effects([name], values, fit_recs, fixed=fixed, forms={name: form}, baseline_cost=base_cost,
                            screened=(fx, cost))
+    fx_narrow, cost_narrow = fx, cost
     if cost <= (1.0 - GROW) * base_cost:     # (an effect that barely shows cannot tell its law's shape)
         for wider in (f for f in forms if laws(form) < laws(f)):
             more = [q for q in wider if q[0] not in laws(form)]
-            held, _ = fit_effects([name], values, fit_recs, fixed={**(fixed or {}), name: fx[name]},
-                                  forms={name: more}, screen_only=True)
-            fx_w, cost_w = fit_effects([name], values, fit_recs, start=held, fixed=fixed, forms={name: wider},
+            held, cost_h = fit_effects([name], values, fit_recs, fixed={**(fixed or {}), name: fx[name]},
+                                       forms={name: more}, screen_only=True)
+            fresh, cost_f = (fit_effects([name], values, fit_recs, fixed=fixed, forms={name: wider},
+                                         screen_only=True)
+                             if (SCREEN_POINTS - 1) ** len(wider) <= FRESH_SCREEN else (None, math.inf))
+            fx_w, cost_w = fit_effects([name], values, fit_recs, start=fresh if cost_f < cost_h else held,
+                                       fixed=fixed, forms={name: wider},
                                        max_evaluations=GROW_EVALUATIONS)
             if cost_w < cost:
                 fx, cost = fx_w, cost_w
-    return name, fx, cost, mean_errors(values, fx, hold_recs), None
+    after = mean_errors(values, fx, hold_recs)
+    if cost < cost_narrow:      # a wider law is kept only where the holdout bears out its further
+        after_n = mean_errors(values, fx_narrow, hold_recs)     # parameters (not told by the fit
+        if sum(after_n.values()) < sum(after.values()):         # recordings, they bend to a misfit)
+            fx, cost, after = fx_narrow, cost_narrow, after_n
+    return name, fx, cost, after, None
 
 
 def _laws(effect) -> list:
@@ -719,7 +740,7 @@ def _fit_pair(args):
     return names, fx, cost, mean_errors(values, fx, hold_recs)
 
 __all__ = [
-    "CANDIDATES", "FORMS", "MIN_SHRINK", "MIN_SHRINK_SECOND", "PAIR_POOL", "SCREEN_POINTS", "SCREEN",
+    "CANDIDATES", "FORMS", "FRESH_SCREEN", "MIN_SHRINK", "MIN_SHRINK_SECOND", "PAIR_POOL", "SCREEN_POINTS", "SCREEN",
     "PAIR_EVALUATIONS", "GROW_EVALUATIONS", "GROW", "FRICTION_GAIN", "FRICTION_CLEAR", "RTOL",
     "FIT_RTOL", "errors", "mean_errors", "fit_cost", "Candidate", "fit_effects", "Attribution",
     "fit_with_load", "fit_stribeck", "fit_seal_laws", "may_start_processes", "baseline_spread",

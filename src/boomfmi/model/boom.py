@@ -150,6 +150,7 @@ class Boom:
         self.inflow_effects = stage("port") + stage("seal")   # port effects act on the valve's flow first
         self.friction_effects = stage("friction")
         self.tau_spool = _param(on, "spool_lag", "tau")
+        self.rate_spool = _param(on, "spool_lag", "rate")   #: the spool's speed limit [V/s] (0: none)
         self.h_wall = _param(on, "wall_heat", "h")
         n_poly = _param(on, "wall_heat", "n")
         #: the gas as the chambers' process sees it: k replaced by the polytropic
@@ -165,11 +166,11 @@ class Boom:
     def spool_step(self, y: float, u: float, dt: float) -> float:
         """The spool's position [V] after ``dt`` [s] of command ``u`` (valve_dynamics);
         without the effect, ``u``."""
-        return fx.spool_lag_step(y, u, dt, self.tau_spool) if self.tau_spool > 0.0 else u
+        return fx.spool_lag_step(y, u, dt, self.tau_spool, self.rate_spool) if self.tau_spool > 0.0 else u
 
     def spool_rate(self, y: float, u: float) -> float:
         """d/dt of the spool's position [V/s] (valve_dynamics on)."""
-        return (u - y) / self.tau_spool
+        return fx.spool_rate(y, u, self.tau_spool, self.rate_spool)
 
     def opening(self, y: float) -> float:
         """The command [V] the orifices see at spool position ``y`` (``command`` stage)."""

@@ -130,7 +130,8 @@ class Effect(NamedTuple):
 # every one is called with a StageContext as ``model`` (the Boom)
 # command: (command [V], params, model) -> command [V]
 def _deadband(u, q, model):
-    return fx.deadband_command(u, q["width"], model.valve.u_centre, model.valve.u_span)
+    return fx.deadband_command(u, q.get("width", 0.0), model.valve.u_centre, model.valve.u_span,
+                               q.get("width_ext"), q.get("width_ret"), q.get("edge", 0.0))
 
 
 # port, seal: (mdot_a, mdot_b, s_a, s_b, p_a, p_b, x, params, model) -> (mdot_a, mdot_b, s_a, s_b);
@@ -176,6 +177,19 @@ SIZE_UNBOUNDED = "an unmodelled effect's size: no physical bound (the catalogue'
 _TAU_SENSOR = _p("tau", "s", 2e-4, 0.03, True, "tau_sensor",
                  "sensor_lag: time constant of a first-order lag on every measured channel; 0: off",
                  no_max=SIZE_UNBOUNDED)
+_DEADBAND = _p("width", "V", 0.01, 1.5, True, "deadband",
+               "valve_deadband: half-width of the closed band around 5 V; 0: off", max=4.9)
+_DEADBAND_EDGE = _p("edge", "V", 0.005, 0.5, True, "deadband_edge",
+                    "valve_deadband: the width over which the band's edge opens gradually (rounded or worn "
+                    "lands: a hyperbola blends closed and linear); 0: a sharp edge", switch=False, max=4.9)
+_DEADBAND_EXT = _p("width_ext", "V", 0.01, 1.5, True, "deadband_ext",
+                   "valve_deadband: width of the closed band below 5 V (commands that extend), in place of "
+                   "deadband on that side; 0: deadband's", max=4.9)
+_DEADBAND_RET = _p("width_ret", "V", 0.01, 1.5, True, "deadband_ret",
+                   "valve_deadband: width of the closed band above 5 V (commands that retract), in place of "
+                   "deadband on that side; 0: deadband's", max=4.9)
+_TAU_SPOOL = _p("tau", "s", 2e-4, 0.05, True, "tau_spool",
+                "valve_dynamics: time constant of the spool's first-order lag; 0: off", no_max=SIZE_UNBOUNDED)
 _C_LEAK = _p("C", "kg/(s.Pa)", 1e-13, 5e-10, True, "C_leak",
              "piston_leakage: laminar conductance of the piston seal, A to B; 0: off", no_max=SIZE_UNBOUNDED)
 _A_LEAK = _p("A", "m2", 1e-10, 2e-7, True, "A_leak",
@@ -191,16 +205,21 @@ _CUSHION_AREA = _p("A_n", "m2", 1e-8, 4e-6, True, "A_cushion",
 #: name -> :class:`Effect`, in the order of ``effects.md``
 EFFECTS = {e.name: e for e in (
     Effect("valve_dynamics", "valve", "spool",
-           ((_p("tau", "s", 2e-4, 0.05, True, "tau_spool",
-                "valve_dynamics: time constant of the spool's first-order lag; 0: off",
-                no_max=SIZE_UNBOUNDED),),),
-           "first-order lag of the spool: dy/dt = (u - y) / tau",
+           ((_TAU_SPOOL,),
+            (_TAU_SPOOL, _p("rate", "V/s", 10.0, 5000.0, True, "rate_spool",
+                            "valve_dynamics: the spool's greatest speed, in volts of command per second "
+                            "(a slew-rate limit: the pilot stage's flow); 0: unlimited",
+                            switch=False, no_max=SIZE_UNBOUNDED))),
+           "first-order lag of the spool, dy/dt = (u - y) / tau; or that lag with the spool's "
+           "speed limited to rate (a slew-rate limit), whichever fits",
            advice="the valve's spool follows the command late: check the valve's driver and pilot supply, and give the controller and the model the spool's lag",
            integrator="spool_lag"),
     Effect("valve_deadband", "valve", "command",
-           ((_p("width", "V", 0.01, 1.5, True, "deadband",
-                "valve_deadband: half-width of the closed band around 5 V; 0: off", max=4.9),),),
-           "no opening for |u - 5| < width; linear beyond, full opening still at 0 and 10 V",
+           ((_DEADBAND,), (_DEADBAND, _DEADBAND_EDGE), (_DEADBAND_EXT, _DEADBAND_RET),
+            (_DEADBAND_EXT, _DEADBAND_RET, _DEADBAND_EDGE)),
+           "no opening for |u - 5| < width; linear beyond, full opening still at 0 and 10 V; or a band "
+           "of its own width on each side of 5 V (lands of unequal overlap, a drifted zero); either with "
+           "its edge rounded over edge (worn lands open gradually), whichever fits",
            _deadband, advice="the valve stays shut around its centre: re-zero the valve, or compensate the "
                              "deadband in the controller"),
     Effect("heat_transfer", "cylinder", "heat",

@@ -22,20 +22,55 @@ from .params import Cylinder, Gas, Load
 from .validation import ParameterError
 
 
-def spool_lag_step(y: float, u: float, dt: float, tau: float) -> float:
+def spool_lag_step(y: float, u: float, dt: float, tau: float, rate: float = 0.0) -> float:
     """The spool's position [V] after ``dt`` [s] of command ``u`` [V], first-order with
-    time constant ``tau`` [s] (exact for a held command); ``tau <= 0`` follows u."""
-    return first_order_step(y, u, dt, tau)
+    time constant ``tau`` [s]; where ``rate`` [V/s] > 0 its speed is limited to it
+    (the pilot stage's flow limits how fast the spool can travel: a slew-rate limit),
+    ``dy/dt = clip((u - y) / tau, -rate, rate)`` (:func:`spool_rate`).  Exact for a held
+    command: the spool travels at ``rate`` until it is within ``rate tau`` of ``u``, then
+    approaches it exponentially.  ``tau <= 0`` follows u."""
+    e = u - y
+    knee = rate * tau
+    if rate <= 0.0 or tau <= 0.0 or abs(e) <= knee:
+        return first_order_step(y, u, dt, tau)
+    sign = math.copysign(1.0, e)
+    t_slew = (abs(e) - knee) / rate            # [s] until the lag takes over
+    if dt <= t_slew:
+        return y + sign * rate * dt
+    return first_order_step(u - sign * knee, u, dt - t_slew, tau)
 
 
-def deadband_command(u: float, width: float, u_centre: float = 5.0, u_span: float = 5.0) -> float:
+def spool_rate(y: float, u: float, tau: float, rate: float = 0.0) -> float:
+    """The spool's speed [V/s] at position ``y`` [V] under command ``u`` [V]:
+    ``(u - y) / tau``, limited to +-``rate`` where ``rate`` > 0 (see :func:`spool_lag_step`)."""
+    r = (u - y) / tau
+    return min(max(r, -rate), rate) if rate > 0.0 else r
+
+
+def deadband_command(u: float, width: float, u_centre: float = 5.0, u_span: float = 5.0,
+                     width_ext: float | None = None, width_ret: float | None = None,
+                     edge: float = 0.0) -> float:
     """The command the orifice sees with a dead band of half-width ``width`` [V] around
     the centre: nothing opens within it, and beyond it the opening is linear again,
-    reaching full opening at the ends of the range."""
-    if width <= 0.0:
-        return u
+    reaching full opening at the ends of the range.  A valve's band is often not
+    centred (the spool's overlap differs on its two lands, or the valve's zero has
+    drifted): ``width_ext`` [V] is the band's width below the centre (commands that
+    extend), ``width_ret`` above it (that retract), each in place of ``width`` where
+    given and > 0.  Worn or rounded lands open gradually: with ``edge`` [V] > 0 the
+    excess over the band, ``z = |u - centre| - w``, opens as the hyperbola
+    ``(z + sqrt(z^2 + edge^2)) / 2`` (closed far inside, linear far outside), less its
+    value at the centre and rescaled to full opening at the range's end."""
     d = u - u_centre
-    mag = max(abs(d) - width, 0.0) * u_span / (u_span - width)
+    side = width_ext if d < 0.0 else width_ret
+    w = side if side is not None and side > 0.0 else width
+    if w <= 0.0:
+        return u
+    if edge <= 0.0:
+        mag = max(abs(d) - w, 0.0) * u_span / (u_span - w)
+    else:
+        ramp = lambda z: 0.5 * (z + math.sqrt(z * z + edge * edge))
+        closed = ramp(-w)
+        mag = (ramp(abs(d) - w) - closed) * u_span / (ramp(u_span - w) - closed)
     return u_centre + math.copysign(mag, d)
 
 
@@ -279,7 +314,7 @@ def sensor_lag_step(measured: float, true: float, dt: float, tau: float) -> floa
     return first_order_step(measured, true, dt, tau)
 
 __all__ = [
-    "spool_lag_step", "deadband_command", "thermal_relaxation_step", "thermal_relaxation_rate",
+    "spool_lag_step", "spool_rate", "deadband_command", "thermal_relaxation_step", "thermal_relaxation_rate",
     "outflow_temperature_rate", "chamber_wall_area", "thermal_time_constant", "leakage_flow",
     "leakage_orifice_flow", "leakage_orifice_slopes", "stribeck_weight", "stribeck_level",
     "stribeck_load", "seal_pressure", "pressure_friction_load", "cushion_engagement",

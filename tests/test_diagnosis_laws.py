@@ -1,0 +1,65 @@
+"""An effect's laws in diagnosis (``diagnose.attribute._fit_and_score``): which law is
+kept.  The model's runs are replaced by closed forms of the parameters, so that only
+the choice is tested (the laws themselves are tested against their ODEs in
+test_effects.py and through the valve FMU in test_effect_options.py)."""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from boomfmi.diagnose import attribute as at
+
+TAU, RATE = 0.005, 250.0
+
+
+def _spool(effects):
+    q = effects.get("valve_dynamics", {})
+    return q.get("tau", 0.0), q.get("rate", 0.0)
+
+
+def _install(monkeypatch, fit, hold):
+    monkeypatch.setattr(at, "fit_cost", lambda values, effects, recs: fit(*_spool(effects)))
+    monkeypatch.setattr(at, "mean_errors", lambda values, effects, recs, rtol=at.RTOL:
+                        dict(zip(("x", "p_a", "p_b"), (hold(*_spool(effects)),) * 3)))
+
+
+def test_a_speed_limit_is_found_where_the_lag_alone_bends_away_from_it(monkeypatch):
+    """The truth is a slow spool with a speed limit (tau 5 ms, 250 V/s).  The lag alone
+    fits best at a much slower tau (it mimics the limit), and a limit screened beside
+    that lag finds nothing; the wider law screened afresh finds the truth's valley."""
+    def fit(tau, rate):
+        if tau <= 0.0:
+            return 1.0
+        if rate <= 0.0:                               # the lag alone: best near 14 ms
+            return 0.02 + (math.log(tau / 0.014)) ** 2
+        return (math.log(tau / TAU)) ** 2 + (math.log(rate / RATE)) ** 2 + 1e-4
+    _install(monkeypatch, fit, lambda tau, rate: fit(tau, rate))
+    name, fx, cost, after, _ = at._fit_and_score(("valve_dynamics", {}, [None], [None], None, 1.0))
+    q = fx["valve_dynamics"]
+    assert q["rate"] == pytest.approx(RATE, rel=0.15) and q["tau"] == pytest.approx(TAU, rel=0.15)
+    assert cost < 0.01
+
+
+def test_a_wider_law_the_holdout_does_not_bear_out_is_not_kept(monkeypatch):
+    """Slow ramps never reach the spool's speed limit: a limit fitted on them bends to
+    whatever else they miss (a slightly lower fit error), and on a holdout of steps it
+    is far worse than the lag alone.  The lag alone is kept."""
+    def fit(tau, rate):
+        base = (math.log(max(tau, 1e-9) / TAU)) ** 2 + 1e-3
+        return base - (5e-4 if 0.0 < rate < 60.0 else 0.0)     # a low limit bends to a misfit
+    def hold(tau, rate):
+        return 0.01 + (math.log(max(tau, 1e-9) / TAU)) ** 2 + (0.3 if 0.0 < rate < 100.0 else 0.0)
+    _install(monkeypatch, fit, hold)
+    name, fx, cost, after, _ = at._fit_and_score(("valve_dynamics", {}, [None], [None], None, 1.0))
+    assert set(fx["valve_dynamics"]) == {"tau"}
+    assert after["p_a"] < 0.05
+
+
+def test_a_wider_law_the_holdout_bears_out_is_kept(monkeypatch):
+    """Where the holdout is predicted better with the limit, the limit stays."""
+    def fit(tau, rate):
+        return (math.log(max(tau, 1e-9) / TAU)) ** 2 + (0.0 if 0.0 < rate < 400.0 else 1e-2) + 1e-4
+    _install(monkeypatch, fit, fit)
+    name, fx, cost, after, _ = at._fit_and_score(("valve_dynamics", {}, [None], [None], None, 1.0))
+    assert set(fx["valve_dynamics"]) == {"tau", "rate"}
