@@ -155,7 +155,7 @@ def identification(args):
 
 def tip_force(args):
     """The tip force's figures per scenario, contact samples only (standard sensors)."""
-    from excavator_tip_force_bounds import best_bounds, fair_bounds, median_width
+    from excavator_tip_force_bounds import CAUSAL_QUANTILE, best_bounds, causal_fair_bounds, fair_bounds, median_width
     print("tip force estimate (per-joint observers; the sliding joints' equations, the last estimate and the least "
           "squares' guess within the set of forces consistent with the sample; its interval), "
           "contact samples only, standard sensors")
@@ -168,6 +168,7 @@ def tip_force(args):
         clipped = tip_force_figures(d["t"].to_numpy(), ft, np.clip(f, lo, hi))
         _, half, inside, none, _ = best_bounds(name, args.every)
         fair, fair_cov, fair_in, fair_n, corner, scale = fair_bounds(d, args.every)
+        causal, causal_cov, causal_tol = causal_fair_bounds(d, args.every)
         lag = " / ".join(f"{1000 * v:.0f}" for v in fig["delay"])
         print(f"  {name}: {fig['contact_samples']} contact samples, peak magnitude {fig['peak']:.1f} N, delay "
               f"x / y / z {lag} ms, the true force inside the interval on all axes at "
@@ -175,7 +176,9 @@ def tip_force(args):
               f"sample): the truth in its set at {inside} of {len(half) + none}; fair bound (this recording, filtered "
               f"at {corner:g} Hz both ways, the rig's sliding, tolerance each joint's residual's {scale:g} quantile): the "
               f"truth in its set at {fair_in} of {fair_n}, per axis " + " / ".join(f"{100 * v:.1f}" for v in fair_cov)
-              + " %")
+              + " %; causal fair bound (the estimator's filters and states, each joint's tolerance its free-air "
+              f"equation error's {CAUSAL_QUANTILE:g} quantile, " + " / ".join(f"{v:.1f}" for v in causal_tol)
+              + " N): per axis " + " / ".join(f"{100 * v:.1f}" for v in causal_cov) + " %")
         for k, ax in enumerate("xyz"):
             h = half[:, k]
             best = median_width(2.0 * h)
@@ -183,7 +186,7 @@ def tip_force(args):
             print(f"    {ax}: RMSE {rmse:6.2f} N = {100 * share:5.1f} % of the peak magnitude "
                   f"{'within 10 %' if share <= 0.1 else 'OVER 10 %':11s}; coverage {100 * cov:5.1f} % "
                   f"{'>= 95 %' if cov >= 0.95 else 'UNDER 95 %':10s}; median width {med:7.2f} N, fair bound "
-                  f"{median_width(fair[:, k]):>8s}, best possible (exact sensors) {best:>8s}; the estimate clipped to "
+                  f"{median_width(fair[:, k]):>8s}, causal fair bound {median_width(causal[:, k]):>8s}, best possible (exact sensors) {best:>8s}; the estimate clipped to "
                   f"its interval: {100 * clipped['rmse_share'][k]:5.1f} %")
 
 

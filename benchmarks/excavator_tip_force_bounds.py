@@ -32,7 +32,11 @@ causal estimator cannot have (the angles and pressures filtered forwards and bac
 the rig's true sliding / sticking / stop per joint, each joint's tolerance calibrated on
 the true force so that the sets hold it at >= 95 % of the samples per axis).  Its median
 width is how wide an interval with that coverage needs to be on the recording the
-estimator actually sees (``--no-fair`` skips it).
+estimator actually sees (``--no-fair`` skips it).  Beside it the *causal fair bound*
+(:func:`causal_fair_bounds`): the same construction with only what a causal estimator
+has (the estimator's own causal filters and the sliding / sticking / stop it infers,
+each joint's tolerance a quantile of its equation error over the recording's free-air
+samples, where the tip force is zero and known; never the truth in contact).
 
     .venv/bin/python benchmarks/excavator_tip_force_bounds.py [--every 5] [--tol 2] [--no-fair]
 """
@@ -239,6 +243,59 @@ def fair_bounds(d, every: int = 5, ex: exc.Excavator | None = None, x_stop: floa
     return best[:6]
 
 
+#: The quantile of each joint's free-air equation error (its magnitude) the causal fair bound
+#: takes as that joint's tolerance.
+CAUSAL_QUANTILE = 0.95
+
+
+def free_air_tolerances(d, ex: exc.Excavator | None = None, quantile: float = CAUSAL_QUANTILE, equations=None):
+    """Each joint's tolerance on its sliding law [N on the piston] from the recording ``d``
+    alone where the tip force is known: the ``quantile`` of the magnitude of its
+    equation's error over the free-air samples (true tip force 0) where the estimator
+    takes it as sliding (there the sliding law's value, ``estimate_tip_force(...,
+    equations=True)``'s fifth array, is the error; ``equations`` (n, 4) those values if
+    already computed).  A joint with fewer than 20 such samples keeps the estimator's own
+    tolerance (``BAND_SLIDE`` times its ``F_s``)."""
+    from boomfmi.physics.force_estimation import BAND_SLIDE, estimate_tip_force
+    ex = exc.Excavator() if ex is None else ex
+    if equations is None:
+        *_, equations, _ = estimate_tip_force(d, ex, bounds=True, equations=True)
+    free = np.linalg.norm(d[["f_tip_x", "f_tip_y", "f_tip_z"]].to_numpy(float), axis=1) == 0.0
+    F_s = np.array([a.F_s for a in ex.actuators])
+    tol = np.broadcast_to(np.asarray(BAND_SLIDE, float), (4,)) * F_s
+    for i in range(4):
+        e = np.abs(np.asarray(equations, float)[free, i])
+        e = e[np.isfinite(e)]
+        if len(e) >= 20:
+            tol[i] = np.quantile(e, quantile)
+    return tol
+
+
+def causal_fair_bounds(d, every: int = 5, ex: exc.Excavator | None = None, quantile: float = CAUSAL_QUANTILE,
+                       tol=None):
+    """Beside :func:`fair_bounds`, the same construction with only what a causal estimator
+    has: the estimator's own causal filters and its own inferred sliding / sticking /
+    stop per joint (``physics.force_estimation.observer_step``), and each joint's
+    tolerance [N on the piston] its free-air equation error's ``quantile``
+    (:func:`free_air_tolerances`, or ``tol`` (4,) if given; never the truth in contact),
+    one per joint for all samples, no union over a window and no share of the force's
+    change (``band_rate`` 0, ``t_hold`` 0); a sticking joint keeps its friction band
+    (widened by its tolerance), a joint on a stop its one side, within the box
+    ``|f_k| <= F_BOUND``.  Returns ``(width, covered, tol)``: the widths (m, 3) [N] at
+    every ``every``-th contact sample (``inf`` where a side is open), the share of them
+    whose interval holds the true force per axis (3,), and the tolerances (4,) [N]."""
+    from boomfmi.physics.force_estimation import F_BOUND, estimate_tip_force
+    ex = exc.Excavator() if ex is None else ex
+    tol = free_air_tolerances(d, ex, quantile) if tol is None else np.asarray(tol, float)
+    F_s = np.array([a.F_s for a in ex.actuators])
+    _, _, lo, hi = estimate_tip_force(d, ex, bounds=True, band_slide=tol / F_s, band_rate=0.0, t_hold=0.0)
+    F = d[["f_tip_x", "f_tip_y", "f_tip_z"]].to_numpy(float)
+    samples = np.flatnonzero(np.linalg.norm(F, axis=1) > 0.0)[::every]
+    lo, hi, f = lo[samples], hi[samples], F[samples]
+    open_ = (lo <= -F_BOUND + 1e-6) | (hi >= F_BOUND - 1e-6)
+    return np.where(open_, np.inf, hi - lo), ((f >= lo) & (f <= hi)).mean(axis=0), tol
+
+
 def median_width(w) -> str:
     """The median of the widths ``w`` [N] (``inf`` where a side is open) as printed:
     "open" where the set is open at more than half the samples."""
@@ -278,6 +335,11 @@ def main(argv=None):
                   f"at {inside} of {n} (per axis " + " / ".join(f"{100 * v:.1f}" for v in covered) + " %); median width x / y / z "
                   + " / ".join(median_width(width[:, k]) for k in range(3)) + f" (exact sensors "
                   + " / ".join(median_width(2.0 * half[:, k]) for k in range(3)) + ")")
+            width, covered, tol = causal_fair_bounds(d, args.every, ex)
+            print(f"  causal fair bound (the estimator's causal filters and inferred states, each joint's tolerance "
+                  f"its free-air equation error's {CAUSAL_QUANTILE:g} quantile, " + " / ".join(f"{v:.1f}" for v in tol)
+                  + " N): per axis " + " / ".join(f"{100 * v:.1f}" for v in covered) + " %; median width x / y / z "
+                  + " / ".join(median_width(width[:, k]) for k in range(3)))
 
 
 if __name__ == "__main__":

@@ -568,7 +568,13 @@ def observer_step(state: dict, angles, p_a, p_b, dt: float, omega, ex: exc.Excav
     widened twice by a factor of 4 before the box ``+-f_bound`` is reported.  The
     interval reported is the union of the last ``t_hold`` [s] of samples' (the
     classification of a joint as sliding or sticking flips with the sensor's noise
-    around a start or a stop, and the sets of neighbouring samples with it)."""
+    around a start or a stop, and the sets of neighbouring samples with it).
+
+    ``state["equation"]`` [N on the piston]: per joint the sliding law's value the bounds
+    use (``nan`` where they do not take the joint as sliding), over free-air samples the
+    joint's own equation error (``benchmarks/excavator_tip_force_bounds.py``'s causal
+    fair bound takes its tolerances from it); ``state["speed"]`` [m/s] the speed they
+    classify each joint by."""
     xm = exc.pistons_from_angles(np.asarray(angles, float), ex)
     Fm = exc.cylinder_forces(p_a, p_b, ex)
     omega = np.broadcast_to(np.asarray(omega, float), (4,))
@@ -613,9 +619,9 @@ def observer_step(state: dict, angles, p_a, p_b, dt: float, omega, ex: exc.Excav
         A, b, verts = _tip_force_set(q, t_lo, t_hi, ex, f_bound)
         if len(verts):
             break
+    lever = np.abs(exc.lever_arms(np.clip(x_mid, 0.0, ex.strokes), ex))
     if len(verts):
         f_lo, f_hi = verts.min(axis=0), verts.max(axis=0)
-        lever = np.abs(exc.lever_arms(np.clip(x_mid, 0.0, ex.strokes), ex))
         half = np.where(info, widen * band * lever, np.inf)        # the sliding joints' equations, [N m]
         f_c = consistent_tip_force(tau, half, state.get("f_c", f), f_rate * dt, A, b, verts, f, f_guess)
     else:
@@ -624,7 +630,11 @@ def observer_step(state: dict, angles, p_a, p_b, dt: float, omega, ex: exc.Excav
     f_est = np.array([first_order_step(state["f"][k], f_c[k], dt, tau_est) for k in range(3)])
     new = {"x_slow": x_slow, "v_slow": v_slow, "x": np.asarray(xs), "v": np.asarray(vs), "F": F_new, "dF": dF_new,
            "f": f_est, "f_c": f_c, "f_known": _low_pass_known(state.get("f_known", np.full(3, np.nan)), f_det, dt, tau_est),
-           "informative": info}
+           "informative": info,
+           # per joint the sliding law's value the bounds use [N on the piston, nan where they do not take the
+           # joint as sliding]: what its equation leaves for the tip force, in free air its equation's error;
+           # and the speed they classify it by [m/s]
+           "equation": np.where(sliding_dir != 0, 0.5 * (t_lo + t_hi) / lever, np.nan), "speed": np.abs(v_both)}
     n_hold = max(1, int(round(t_hold / dt)) + 1) if dt > 0 else 1
     new["bounds_recent"] = (state.get("bounds_recent", [])[-(n_hold - 1):] if n_hold > 1 else []) + [(f_lo, f_hi)]
     new["f_lo"] = np.min([b[0] for b in new["bounds_recent"]], axis=0)
@@ -637,7 +647,7 @@ def estimate_tip_force(data, ex: exc.Excavator = exc.Excavator(), payload: float
                        cannot_tell: bool = False, v_info: float = 1e-3, f_info: float = 3.0,
                        f_motion_swing: float = F_MOTION_SWING, bounds: bool = False, band_slide=BAND_SLIDE,
                        band_rate: float = BAND_RATE, f_bound: float = F_BOUND, t_hold: float = T_HOLD,
-                       f_rate: float = F_RATE, f_guess: float = F_GUESS):
+                       f_rate: float = F_RATE, f_guess: float = F_GUESS, equations: bool = False):
     """The observer run over an excavator recording (a DataFrame with its columns,
     pressures gauge): arrays ``f`` (n, 3) [N] and ``residual`` (n,) [N m].
 
@@ -648,7 +658,11 @@ def estimate_tip_force(data, ex: exc.Excavator = exc.Excavator(), payload: float
     ``bounds``: ``(f, residual, f_lo, f_hi)``, the last two (n, 3) [N], per sample
     and world axis the interval of tip forces consistent with the recording within
     its noise (``observer_step``'s ``state["f_lo"]``, ``state["f_hi"]``; a side at
-    ``+-f_bound`` is open: a stop or a sticking joint leaves it unbounded)."""
+    ``+-f_bound`` is open: a stop or a sticking joint leaves it unbounded).  With
+    ``equations`` as well a fifth and a sixth, (n, 4) each: per sample and joint the
+    sliding law's value the bounds use [N on the piston] (``state["equation"]``, ``nan``
+    where the joint does not count as sliding; over free-air samples the joint's own
+    equation error) and the speed the bounds classify it by [m/s] (``state["speed"]``)."""
     P_atm = ex.P_atm if P_atm is None else P_atm
     t = data["t"].to_numpy(float)
     Q = np.column_stack([data[f"angle_{j}"].to_numpy(float) for j in exc.JOINTS])
@@ -661,6 +675,7 @@ def estimate_tip_force(data, ex: exc.Excavator = exc.Excavator(), payload: float
     f_known = np.full((len(t), 3), np.nan)
     n_info = np.zeros(len(t), int)
     f_lo, f_hi = np.full((len(t), 3), -float(f_bound)), np.full((len(t), 3), float(f_bound))
+    eq, speed = np.full((len(t), 4), np.nan), np.zeros((len(t), 4))
     for k in range(1, len(t)):
         state, f[k], res[k], _ = observer_step(state, Q[k], PA[k], PB[k], t[k] - t[k - 1], omega, ex, payload,
                                                tau_est, rest_weight, stop_weight, v_info, f_info, band_slide,
@@ -668,8 +683,9 @@ def estimate_tip_force(data, ex: exc.Excavator = exc.Excavator(), payload: float
         f_known[k] = state["f_known"]
         n_info[k] = int(np.sum(state["informative"]))
         f_lo[k], f_hi[k] = state["f_lo"], state["f_hi"]
+        eq[k], speed[k] = state["equation"], state["speed"]
     if bounds:
-        return f, res, f_lo, f_hi
+        return (f, res, f_lo, f_hi, eq, speed) if equations else (f, res, f_lo, f_hi)
     if cannot_tell:
         return f_known, res, n_info
     return f, res
