@@ -63,3 +63,21 @@ def test_a_wider_law_the_holdout_bears_out_is_kept(monkeypatch):
     _install(monkeypatch, fit, fit)
     name, fx, cost, after, _ = at._fit_and_score(("valve_dynamics", {}, [None], [None], None, 1.0))
     assert set(fx["valve_dynamics"]) == {"tau", "rate"}
+
+
+def test_a_wider_law_is_grown_where_only_its_further_parameter_shows_something(monkeypatch):
+    """A cushion without a check valve slows the return, which the needle's own law never
+    touches: that law removes nothing, the check valve's area screened beside it removes
+    most of the error, so the wider law is grown (and kept: the holdout bears it out)."""
+    def cost(effects):
+        q = effects.get("end_cushioning", {})
+        if q.get("length", 0.0) <= 0.0:
+            return 1.0
+        a_c = q.get("A_c", 0.0)
+        return 1.0 if a_c <= 0.0 else 0.1 + (math.log10(a_c / 1e-8)) ** 2 / 100.0
+    monkeypatch.setattr(at, "fit_cost", lambda values, effects, recs: cost(effects))
+    monkeypatch.setattr(at, "mean_errors", lambda values, effects, recs, rtol=at.RTOL:
+                        dict.fromkeys(("x", "p_a", "p_b"), cost(effects)))
+    name, fx, c, after, _ = at._fit_and_score(("end_cushioning", {}, [None], [None], None, 1.0))
+    assert "A_c" in fx["end_cushioning"] and fx["end_cushioning"]["A_c"] < 1e-7
+    assert c < 0.2

@@ -18,7 +18,7 @@ def test_every_effect_is_off_at_its_off_value():
     assert fx.thermal_relaxation_step(4e5, 1e-4, 3e-5, 1e-3, 0.0, 287.0, 293.15) == 4e5
     assert fx.leakage_flow(5e5, 2e5, 0.0) == 0.0
     assert fx.stribeck_load(load, 0.01, 0.0) is load
-    assert fx.cushion_outflow(-1e-3, 4e5, 0.0, 0.0, 1e-7, 1e5) == -1e-3
+    assert fx.cushion_flow(-1e-3, 4e5, 0.0, 0.0, 1e-7, 1e5) == -1e-3
     assert fx.sensor_lag_step(0.1, 0.2, 1e-3, 0.0) == 0.2
 
 
@@ -98,23 +98,37 @@ def test_cushion_port_cut_follows_the_spears_engagement():
     assert fx.cushion_engagement_slope(0.005, l_c) == 0.0
 
 
-def test_cushion_outflow_is_the_series_of_valve_and_needle():
+def test_cushion_flow_is_the_series_of_valve_and_needle():
     mdot_n = mass_flow(1e-7, reference_rig.P_s, reference_rig.P_e)
-    full = fx.cushion_outflow(-2 * mdot_n, reference_rig.P_s, 0.0, 0.01, 1e-7, reference_rig.P_e)
+    full = fx.cushion_flow(-2 * mdot_n, reference_rig.P_s, 0.0, 0.01, 1e-7, reference_rig.P_e)
     assert full == pytest.approx(-2 * mdot_n / math.sqrt(5.0), rel=1e-12)
-    half = fx.cushion_outflow(-2 * mdot_n, reference_rig.P_s, 0.009, 0.01, 1e-7, reference_rig.P_e)   # spear half in
+    half = fx.cushion_flow(-2 * mdot_n, reference_rig.P_s, 0.009, 0.01, 1e-7, reference_rig.P_e)   # spear half in
     assert half == pytest.approx(-2 * mdot_n / math.sqrt(3.0), rel=1e-12)
     assert -2 * mdot_n < half < full < 0.0
-    assert fx.cushion_outflow(1e-3, reference_rig.P_s, 0.0, 0.01, 1e-7, reference_rig.P_e) == 1e-3        # inflow: check valve
-    assert fx.cushion_outflow(-1e-3, reference_rig.P_s, 0.02, 0.01, 1e-7, reference_rig.P_e) == -1e-3     # outside the cushion
+    assert fx.cushion_flow(1e-3, reference_rig.P_s, 0.0, 0.01, 1e-7, reference_rig.P_e) == 1e-3        # inflow: check valve
+    assert fx.cushion_flow(-1e-3, reference_rig.P_s, 0.02, 0.01, 1e-7, reference_rig.P_e) == -1e-3     # outside the cushion
 
 
-def test_cushion_outflow_slope_matches_a_finite_difference():
+def test_without_a_free_check_valve_the_return_passes_needle_and_check_valve_in_series():
+    """A_c > 0: an inflow within the cushion passes the needle and the check valve side by
+    side (area A_n + A_c, from the supply) in series with the valve; outside, freely."""
+    P_s, P_e, p = reference_rig.P_s, reference_rig.P_e, 2e5
+    A_n, A_c = 1e-7, 2e-7
+    m_r = mass_flow(A_n + A_c, P_s, p)
+    args = (0.0, 0.01, A_n, P_e)
+    assert fx.cushion_flow(2 * m_r, p, *args, P_s=P_s, A_c=A_c) == pytest.approx(2 * m_r / math.sqrt(5.0), rel=1e-12)
+    assert fx.cushion_flow(2 * m_r, p, 0.02, 0.01, A_n, P_e, P_s=P_s, A_c=A_c) == 2 * m_r       # outside the cushion
+    assert fx.cushion_flow(2 * m_r, p, *args) == 2 * m_r                                     # A_c = 0: a free return
+    assert fx.cushion_flow(1e-3, P_s + 1.0, *args, P_s=P_s, A_c=A_c) == 0.0                  # nothing pushes air in
+
+
+@pytest.mark.parametrize("m, s, more", [(-5e-3, -2e-8, {}), (5e-3, -2e-8, {"P_s": reference_rig.P_s, "A_c": 2e-7})])
+def test_cushion_flow_slope_matches_a_finite_difference(m, s, more):
     args = (0.0, 0.01, 1e-7, reference_rig.P_e)
-    p, m, s = 4e5, -5e-3, -2e-8
+    p = 4e5
     h = 10.0
-    fd = (fx.cushion_outflow(m + s * h, p + h, *args) - fx.cushion_outflow(m - s * h, p - h, *args)) / (2 * h)
-    assert fx.cushion_outflow_slope(m, s, p, *args) == pytest.approx(fd, rel=1e-4)
+    fd = (fx.cushion_flow(m + s * h, p + h, *args, **more) - fx.cushion_flow(m - s * h, p - h, *args, **more)) / (2 * h)
+    assert fx.cushion_flow_slope(m, s, p, *args, **more) == pytest.approx(fd, rel=1e-4)
 
 
 def test_sensor_lag_is_exact_first_order():

@@ -11,8 +11,10 @@ and p_b.
   with or without its port cut off the sensed chamber), each is screened over its
   range and the one that screens best on the fit recordings is fitted; a law that
   holds another's parameters and more is grown from that one's fit, where it removes
-  ``GROW`` of the fit error (an effect that barely shows cannot tell its shape): its
-  further parameters screened beside it, or, where its own screen takes at most
+  ``GROW`` of the fit error (an effect that barely shows cannot tell its shape), or
+  where its further parameters screened beside it remove that much (a cushion without
+  a check valve slows the return, which the needle's law never touches): its further
+  parameters screened beside it, or, where its own screen takes at most
   ``FRESH_SCREEN`` runs and fits better there, the wider law screened afresh (a lag
   fitted alone bends to mimic a speed limit, and the limit screened beside that lag
   finds nothing), then all refined together, kept where it fits better (a
@@ -300,19 +302,22 @@ def _fit_and_score(args):
     fx, cost = fit_effects([name], values, fit_recs, fixed=fixed, forms={name: form}, baseline_cost=base_cost,
                            screened=(fx, cost))
     fx_narrow, cost_narrow = fx, cost
-    if cost <= (1.0 - GROW) * base_cost:     # (an effect that barely shows cannot tell its law's shape)
-        for wider in (f for f in forms if laws(form) < laws(f)):
-            more = [q for q in wider if q[0] not in laws(form)]
-            held, cost_h = fit_effects([name], values, fit_recs, fixed={**(fixed or {}), name: fx[name]},
-                                       forms={name: more}, screen_only=True)
-            fresh, cost_f = (fit_effects([name], values, fit_recs, fixed=fixed, forms={name: wider},
-                                         screen_only=True)
-                             if (SCREEN_POINTS - 1) ** len(wider) <= FRESH_SCREEN else (None, math.inf))
-            fx_w, cost_w = fit_effects([name], values, fit_recs, start=fresh if cost_f < cost_h else held,
-                                       fixed=fixed, forms={name: wider},
-                                       max_evaluations=GROW_EVALUATIONS)
-            if cost_w < cost:
-                fx, cost = fx_w, cost_w
+    shows = cost <= (1.0 - GROW) * base_cost      # (an effect that barely shows cannot tell its law's shape)
+    for wider in (f for f in forms if laws(form) < laws(f)):
+        more = [q for q in wider if q[0] not in laws(form)]
+        held, cost_h = fit_effects([name], values, fit_recs, fixed={**(fixed or {}), name: fx_narrow[name]},
+                                   forms={name: more}, screen_only=True)
+        # where the narrower law shows nothing, the wider law is grown only where its further
+        # parameters alone show something (a cushion without a check valve slows the return,
+        # which the needle's law never touches)
+        if not (shows or cost_h <= (1.0 - GROW) * base_cost):
+            continue
+        fresh, cost_f = (fit_effects([name], values, fit_recs, fixed=fixed, forms={name: wider}, screen_only=True)
+                         if (SCREEN_POINTS - 1) ** len(wider) <= FRESH_SCREEN else (None, math.inf))
+        fx_w, cost_w = fit_effects([name], values, fit_recs, start=fresh if cost_f < cost_h else held,
+                                   fixed=fixed, forms={name: wider}, max_evaluations=GROW_EVALUATIONS)
+        if cost_w < cost:
+            fx, cost = fx_w, cost_w
     after = mean_errors(values, fx, hold_recs)
     if cost < cost_narrow:      # a wider law is kept only where the holdout bears out its further
         after_n = mean_errors(values, fx_narrow, hold_recs)     # parameters (not told by the fit

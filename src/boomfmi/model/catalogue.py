@@ -138,11 +138,12 @@ def _deadband(u, q, model):
 # s_a, s_b (the flows' slopes in their chamber's pressure) may be None: not wanted
 def _cushion(m_a, m_b, s_a, s_b, p_a, p_b, x, q, model):
     l_c, A_n, P_e, gas, L = q["length"], q["A_n"], model.valve.P_e, model.gas, model.cylinder.L
+    more = (model.valve.P_s, q.get("A_c", 0.0))
     if s_a is not None:
-        s_a = fx.cushion_outflow_slope(m_a, s_a, p_a, x, l_c, A_n, P_e, gas)
-        s_b = fx.cushion_outflow_slope(m_b, s_b, p_b, L - x, l_c, A_n, P_e, gas)
-    return (fx.cushion_outflow(m_a, p_a, x, l_c, A_n, P_e, gas),
-            fx.cushion_outflow(m_b, p_b, L - x, l_c, A_n, P_e, gas), s_a, s_b)
+        s_a = fx.cushion_flow_slope(m_a, s_a, p_a, x, l_c, A_n, P_e, gas, *more)
+        s_b = fx.cushion_flow_slope(m_b, s_b, p_b, L - x, l_c, A_n, P_e, gas, *more)
+    return (fx.cushion_flow(m_a, p_a, x, l_c, A_n, P_e, gas, *more),
+            fx.cushion_flow(m_b, p_b, L - x, l_c, A_n, P_e, gas, *more), s_a, s_b)
 
 
 def _leak(m_a, m_b, s_a, s_b, p_a, p_b, x, q, model):
@@ -251,6 +252,11 @@ EFFECTS = {e.name: e for e in (
     Effect("end_cushioning", "cylinder", "port",
            ((_CUSHION_LENGTH, _CUSHION_AREA),
             (_CUSHION_LENGTH, _CUSHION_AREA,
+             _p("A_c", "m2", 1e-9, 1e-4, True, "A_cushion_check",
+                "end_cushioning: the check valve's area beside the needle, through which the air returns "
+                "into the chamber within the cushion (small: a cushion without a check valve, leaving "
+                "the end slowed too); 0: a free return", switch=False, no_max=SIZE_UNBOUNDED)),
+            (_CUSHION_LENGTH, _CUSHION_AREA,
              _p("V_p", "m3", 3e-7, 1.2e-5, True, "V_cushion_port",
                 "end_cushioning: the port's volume (part of the dead volume, between the cushion's "
                 "spear and the valve), cut off the chamber within the cushion; 0: none",
@@ -258,7 +264,8 @@ EFFECTS = {e.name: e for e in (
                                      "initialisation where it is not smaller", cap="dead_volume"))),
            "within length of a chamber's end, its outflow also passes the cushion needle "
            "(area A_n, to the exhaust) in series with the valve; inflow passes freely (the check "
-           "valve); where the port's volume V_p is given, the chamber the sensor reads is left "
+           "valve), or with a check valve of area A_c the needle and it in series with the valve (a "
+           "small A_c: no check valve); where the port's volume V_p is given, the chamber the sensor reads is left "
            "without it within the cushion, whichever fits",
            _cushion, advice="the cylinder's end cushions brake the last part of the stroke: check the cushion "
                             "needles' setting, or keep the work away from the stroke's ends",

@@ -219,15 +219,22 @@ def pressure_friction_load(load: Load, p_a: float, p_b: float, P_atm: float, c_s
 
 
 def _cushion(mdot: float, p: float, distance: float, length: float, A_n: float, P_e: float,
-             gas: Gas):
-    """The spear's engagement g [1] and the needle's flow into the chamber [kg/s] and its
-    slope in ``p`` [kg/(s Pa)], where the cushion acts on ``mdot``; else None."""
-    if mdot >= 0.0:
+             gas: Gas, P_s: float = 0.0, A_c: float = 0.0):
+    """The spear's engagement g [1] and the restriction's flow into the chamber [kg/s] and
+    its slope in ``p`` [kg/(s Pa)], where the cushion acts on ``mdot``; else None.  An
+    outflow passes the needle ``A_n`` to the exhaust ``P_e``; an inflow passes freely, or
+    (``A_c`` > 0) the needle and the check valve's ``A_c`` side by side from the supply
+    ``P_s``."""
+    if mdot < 0.0:
+        A, P_up = A_n, P_e
+    elif mdot > 0.0 and A_c > 0.0:
+        A, P_up = A_n + A_c, P_s
+    else:
         return None
     engaged = cushion_engagement(distance, length)
     if engaged <= 0.0:
         return None
-    return engaged, signed_mass_flow(A_n, P_e, p, gas), signed_mass_flow_slope(A_n, P_e, p, gas)
+    return engaged, signed_mass_flow(A, P_up, p, gas), signed_mass_flow_slope(A, P_up, p, gas)
 
 
 def cushion_engagement(distance, length: float):
@@ -264,7 +271,7 @@ def cushion_port_cut(distance, length: float, V_p: float):
     (:func:`cushion_engagement`).  Within the cushion the chamber, which the pressure
     sensor reads, is left with ``A x + V_0 - V_p``: it is stiffer, and the port's air
     reaches the valve without passing the needle (its pressure follows the valve's
-    quasi-statically: the series restriction of :func:`cushion_outflow`).  The cut
+    quasi-statically: the series restriction of :func:`cushion_flow`).  The cut
     separates air, it does not compress it: the chamber's pressure is continuous as the
     spear enters, and only its air's volume and mass are smaller.  ``V_p <= 0``: 0."""
     if V_p <= 0.0:
@@ -272,8 +279,8 @@ def cushion_port_cut(distance, length: float, V_p: float):
     return V_p * cushion_engagement(distance, length)
 
 
-def cushion_outflow(mdot: float, p: float, distance: float, length: float, A_n: float,
-                    P_e: float, gas: Gas = Gas()) -> float:
+def cushion_flow(mdot: float, p: float, distance: float, length: float, A_n: float,
+                 P_e: float, gas: Gas = Gas(), P_s: float = 0.0, A_c: float = 0.0) -> float:
     """End-of-stroke cushioning: a chamber's mass flow [kg/s] once the cushion acts on
     the flow ``mdot`` [kg/s] the valve alone passes, the chamber at pressure ``p`` [Pa,
     absolute] and the piston ``distance`` [m] from that chamber's end of stroke.
@@ -283,26 +290,29 @@ def cushion_outflow(mdot: float, p: float, distance: float, length: float, A_n: 
     [m^2] to the exhaust pressure ``P_e`` [Pa]; two restrictions in series pass
     ``1/mdot^2 = 1/mdot_v^2 + g/mdot_n^2``, the spear's engagement ``g`` rising from 0
     to 1 over the first fifth of ``length`` (so the flow is continuous in the position).
-    Inflow passes the cushion's check valve freely.  ``length <= 0``: off."""
-    c = _cushion(mdot, p, distance, length, A_n, P_e, gas)
+    Inflow passes the cushion's check valve freely; or, with ``A_c`` [m^2] > 0, a check
+    valve of that area beside the needle (a small one, or none at all: the needle alone,
+    and leaving the end is slowed too), the two in series with the valve from the supply
+    ``P_s`` [Pa] alike.  ``length <= 0``: off."""
+    c = _cushion(mdot, p, distance, length, A_n, P_e, gas, P_s, A_c)
     if c is None:
         return mdot
     g, n, _ = c
-    if n >= 0.0:                        # no pressure left to push air out through the needle
+    if n * mdot <= 0.0:                 # no pressure left to push air through the restriction
         return 0.0
     return mdot / math.sqrt(1.0 + g * (mdot / n) ** 2)
 
 
-def cushion_outflow_slope(mdot: float, slope: float, p: float, distance: float, length: float,
-                          A_n: float, P_e: float, gas: Gas = Gas()) -> float:
-    """The slope [kg/(s Pa)] of :func:`cushion_outflow` with respect to ``p``, given the
+def cushion_flow_slope(mdot: float, slope: float, p: float, distance: float, length: float,
+                       A_n: float, P_e: float, gas: Gas = Gas(), P_s: float = 0.0, A_c: float = 0.0) -> float:
+    """The slope [kg/(s Pa)] of :func:`cushion_flow` with respect to ``p``, given the
     valve's flow ``mdot`` and its slope ``slope``: with ``r = mdot / mdot_n`` and
     ``D = 1 + g r^2``, ``(slope + g r^3 dmdot_n/dp) / D^(3/2)``."""
-    c = _cushion(mdot, p, distance, length, A_n, P_e, gas)
+    c = _cushion(mdot, p, distance, length, A_n, P_e, gas, P_s, A_c)
     if c is None:
         return slope
     g, n, s_n = c
-    if n >= 0.0:
+    if n * mdot <= 0.0:
         return 0.0
     r = mdot / n
     return (slope + g * r ** 3 * s_n) / (1.0 + g * r * r) ** 1.5
@@ -318,6 +328,6 @@ __all__ = [
     "outflow_temperature_rate", "chamber_wall_area", "thermal_time_constant", "leakage_flow",
     "leakage_orifice_flow", "leakage_orifice_slopes", "stribeck_weight", "stribeck_level",
     "stribeck_load", "seal_pressure", "pressure_friction_load", "cushion_engagement",
-    "cushion_engagement_slope", "check_cushion_port", "cushion_port_cut", "cushion_outflow",
-    "cushion_outflow_slope", "sensor_lag_step",
+    "cushion_engagement_slope", "check_cushion_port", "cushion_port_cut", "cushion_flow",
+    "cushion_flow_slope", "sensor_lag_step",
 ]
