@@ -96,11 +96,12 @@ def test_diagnosis_reads_its_candidates_and_fmu_options_from_the_catalogue(tmp_p
 
 def test_options_switch_effects_on_only_when_a_switching_parameter_is_set():
     off = {"h_wall": 0.0, "n_poly": 0.0, "C_leak": 0.0, "A_leak": 0.0, "l_cushion": 0.0, "A_cushion": 1e-7,
-           "V_cushion_port": 4e-6}
+           "A_cushion_check": 0.0, "V_cushion_port": 4e-6}
     assert effects_from_options("cylinder", off) == {}          # a port's volume alone switches nothing on
     on = dict(off, A_leak=1e-8, l_cushion=0.01)
     assert effects_from_options("cylinder", on) == {"piston_leakage": {"C": 0.0, "A": 1e-8},
-                                                    "end_cushioning": {"length": 0.01, "A_n": 1e-7, "V_p": 4e-6}}
+                                                    "end_cushioning": {"length": 0.01, "A_n": 1e-7, "A_c": 0.0,
+                                                                       "V_p": 4e-6}}
     with pytest.raises(ph.ParameterError, match="effects.end_cushioning.V_p"):
         Model(effects={"end_cushioning": {"length": 0.01, "A_n": 1e-7, "V_p": 2e-5}}).check()
     with pytest.raises(ph.ParameterError, match="not an effect"):
