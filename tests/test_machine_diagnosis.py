@@ -124,7 +124,7 @@ def test_a_pair_across_joints_is_named(tmp_path):
     flagged.  (This is also the test of a leak on the arm named with its joint.)"""
     joints = {"arm": {"effects": {"piston_leakage": {"A_leak": 3e-8}}},
               "bucket": {"effects": {"valve_deadband": {"overlap": 0.4}}}}
-    found = diagnose_joints(*_runs(joints, 6.0, E.excavator_excitation(seed=2, duration=6.0), 6.0))
+    found = diagnose_joints(*_runs(joints, 5.0, E.excavator_excitation(seed=2, duration=5.0), 5.0))
     assert sorted(found.verdict) == ["piston_leakage@arm", "valve_deadband@bucket"]
     for joint, name in (("arm", "piston_leakage"), ("bucket", "valve_deadband")):
         cut = found.joints[joint].pressures
