@@ -70,7 +70,7 @@ def push():
 
 @pytest.mark.xfail(strict=True, reason="physically unobservable in this scenario: through the whole push the "
                                        "swing sits on its stop (lateral force unfelt) and never more than one "
-                                       "joint slides (0 samples of 3983 with >= 2); measured RMSE 66/78/44 % "
+                                       "joint slides (0 samples of 3983 with >= 2); measured RMSE 66/53/41 % "
                                        "of the peak (x/y/z); see docs/excavator.md")
 def test_tip_force_rmse_within_10_percent_of_peak(push):
     f, _ = estimate_tip_force(push)
@@ -88,14 +88,6 @@ def soil(request):
 
 #: (scenario, axis) whose RMSE is not yet within 10 % of the peak, and why
 SOIL_NOT_YET = {
-    ("soft_soil", "x"): "measured 32.5 % over the whole run (5.0 % of the peak magnitude over the contact samples, "
-                        "benchmarks/excavator_identification.py --tip-only): the swing sits on its stop all through "
-                        "the contact, so along x the recordings leave the force open on one side; in free air the "
-                        "cycle's fast moves (one or two joints sliding, arriving at their stops) pull the estimate "
-                        "within the wide sets consistent with the samples (10.1 % with the least squares alone, "
-                        "whose guess held every resting joint's friction; see docs/excavator.md)",
-    ("soft_soil", "y"): "measured 32.8 % of a 10.5 N peak over the whole run (2.3 % of the peak magnitude over the "
-                        "contact samples): open on one side along y too (the swing on its stop), and free air as x",
     ("hard_soil", "z"): "measured 12.1 %: pressed into the ground the boom sits on its lower stop and the bucket on its "
                         "stop, so only the arm slides and the force is bounded, not determined (see docs/excavator.md)",
 }

@@ -350,6 +350,11 @@ F_GUESS = 20.0
 #: (the digging cycle into soft soil, whole run, z: 13.6 % of its peak held in sets of
 #: any width, 7.2 % with this).
 HOLD_WIDTH = 100.0
+#: [1] A direction counts as felt by the sliding joints' equations where the singular
+#: value of their rows (each scaled to unit length) along it exceeds this (about 6 deg
+#: off a row's direction): :func:`consistent_tip_force` holds the last value there
+#: only as firmly as along its least-held world axis.
+HOLD_FELT = 0.1
 #: [s] The estimate's first-order low-pass (after :func:`consistent_tip_force`): the
 #: angles' acceleration noise through the 15 Hz filters is the error left where every
 #: joint slides (the load cell's push along z: 9.3 % of its peak with 4 ms, 6.1 % with
@@ -370,7 +375,11 @@ def joint_force_bands(x, v, a, drive, sliding, at_lower, at_upper, ex: exc.Excav
     sample within the tolerance ``band`` [N on the piston, one for all or per joint]:
     a sliding joint (``sliding`` -1 or +1) the sliding law's value +-``band``; any other
     its net force +- its static friction ``F_s scale`` (which also covers a slow creep's
-    ``K_v v + F_d``) and ``band``; a joint pressed on its lower stop (``at_lower``) no
+    ``K_v v + F_d``) and ``band``, and where it moves (``v`` not zero: a joint the
+    bounds do not take as sliding, arriving at its stop or slowing to a halt) reaching
+    to the sliding law's value at ``v`` as well: a piston that still runs at speed
+    ``v`` a millimetre before its stop carries its viscous force ``K_v v``, which no
+    static band holds; a joint pressed on its lower stop (``at_lower``) no
     lower bound, on its upper (``at_upper``) no upper bound (``-inf`` / ``inf``)."""
     x = np.clip(np.asarray(x, float), 0.0, ex.strokes)
     v = np.asarray(v, float)
@@ -381,8 +390,12 @@ def joint_force_bands(x, v, a, drive, sliding, at_lower, at_upper, ex: exc.Excav
     sliding = np.asarray(sliding, float)
     lo, hi = np.empty(4), np.empty(4)
     for i, act in enumerate(ex.actuators):
-        f_lo, f_hi = friction_band(net[i], v[i], (act.K_v, act.F_s, act.F_d), scale[i],
+        friction = (act.K_v, act.F_s, act.F_d)
+        f_lo, f_hi = friction_band(net[i], v[i], friction, scale[i],
                                    np.sign(sliding[i]) if sliding[i] != 0 else None, band[i])
+        if sliding[i] == 0 and v[i] != 0.0:
+            s_lo, s_hi = friction_band(net[i], v[i], friction, scale[i], np.sign(v[i]), band[i])
+            f_lo, f_hi = min(f_lo, s_lo), max(f_hi, s_hi)
         lo[i], hi[i] = -f_hi, -f_lo          # the pistons' side of J^T f_tip: against their external force
     lo = np.where(np.asarray(at_lower, bool), -np.inf, lo)
     hi = np.where(np.asarray(at_upper, bool), np.inf, hi)
@@ -461,7 +474,12 @@ def consistent_tip_force(tau, half, f_prev, step: float, A, b, vertices, f_guess
       sides to within :data:`HOLD_WIDTH`, weighted by ``step`` [N] (how far the tip force may plausibly move in a
       sample, :data:`F_RATE` times it): where the sliding joints leave a direction
       open, the estimate keeps its last value as far as the friction bands allow
-      (instead of a guess at the friction that holds a resting joint);
+      (instead of a guess at the friction that holds a resting joint).  Along the
+      directions the sliding joints' rows span (:data:`HOLD_FELT`) it holds only as
+      firmly as along the least-held axis: a hold that pins some axes and not others
+      there pushes an equation's error into the free axis, amplified by the row's small
+      component along it (only the boom sliding in free air, y open: its noise read as
+      -20 N along x);
     * the guess ``f_guess`` [N] (the least squares over all four joints,
       :func:`tip_force_from_torques`; default ``f_prev``), weighted by ``guess`` [N]:
       along an axis a stop leaves open the last value would wander with the set's
@@ -474,8 +492,18 @@ def consistent_tip_force(tau, half, f_prev, step: float, A, b, vertices, f_guess
     f_bound = float(np.max(np.abs(b[-6:])))
     held = (hi - lo < HOLD_WIDTH) & (lo > -f_bound * (1 - 1e-9)) & (hi < f_bound * (1 - 1e-9))
     w_prev = np.where(held, 1.0 / step ** 2, 0.0)
-    H = np.diag(w_prev + 1.0 / guess ** 2)
-    g = w_prev * np.asarray(f_prev, float) + np.asarray(f_guess, float) / guess ** 2
+    # the directions the sliding joints' equations feel (:data:`HOLD_FELT`) hold only as
+    # firmly as the least-held axis; the others as their axes do
+    P = np.eye(3)
+    eqs = np.isfinite(half) & (np.asarray(half, float) > 0.0)
+    if eqs.any():
+        rows = JT[eqs] / np.linalg.norm(JT[eqs], axis=1, keepdims=True)
+        _, sv, vt = np.linalg.svd(rows, full_matrices=False)
+        felt = vt[sv > HOLD_FELT]
+        P = P - felt.T @ felt
+    W = P @ np.diag(w_prev) @ P + (np.eye(3) - P) * float(np.min(w_prev))
+    H = W + np.eye(3) / guess ** 2
+    g = W @ np.asarray(f_prev, float) + np.asarray(f_guess, float) / guess ** 2
     for i in range(len(tau)):
         if np.isfinite(half[i]) and half[i] > 0.0:
             H += np.outer(JT[i], JT[i]) / half[i] ** 2
@@ -732,7 +760,7 @@ __all__ = [
     "measured_drive_force", "below_sensor_floor", "friction_band", "observed_joint_forces",
     "observed_external_force", "reflected_force", "observed_joint_torques", "tip_force_from_torques",
     "informative_joints", "tip_force_determined", "F_BOUND", "BAND_SLIDE", "BAND_RATE",
-    "V_SLIDE_BOUNDS", "F_RATE", "F_GUESS", "HOLD_WIDTH", "TAU_EST", "T_HOLD", "joint_force_bands",
+    "V_SLIDE_BOUNDS", "F_RATE", "F_GUESS", "HOLD_WIDTH", "HOLD_FELT", "TAU_EST", "T_HOLD", "joint_force_bands",
     "tip_force_interval", "least_squares_in_set", "consistent_tip_force", "F_MOTION", "F_MOTION_SWING",
     "V_ARRIVAL", "observer_start", "observer_step", "estimate_tip_force", "tip_force_figures",
 ]
