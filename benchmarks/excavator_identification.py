@@ -155,7 +155,8 @@ def identification(args):
 
 def tip_force(args):
     """The tip force's figures per scenario, contact samples only (standard sensors)."""
-    from excavator_tip_force_bounds import CAUSAL_QUANTILE, best_bounds, causal_fair_bounds, fair_bounds, median_width
+    from excavator_tip_force_bounds import (CAUSAL_QUANTILE, best_bounds, causal_bounds_at_coverage, causal_fair_bounds,
+                                            fair_bounds, median_width)
     print("tip force estimate (per-joint observers; the sliding joints' equations, the last estimate and the least "
           "squares' guess within the set of forces consistent with the sample; its interval), "
           "contact samples only, standard sensors")
@@ -185,6 +186,14 @@ def tip_force(args):
         print(f"    free air ({int(free.sum())} samples, no contact): the estimate's false force RMS x / y / z "
               + " / ".join(f"{v:.2f}" for v in false) + " N; the whole run's RMSE over each axis' own peak "
               + " / ".join(f"{100 * v:.1f}" for v in whole) + " %")
+        matched = causal_bounds_at_coverage(d, args.every)
+        print("    the causal fair bound at >= 95 % coverage per axis (its free-air tolerances scaled until the truth "
+              "lies in it at 95 % of the contact samples): median width x / y / z "
+              + " / ".join(median_width(w) for w, _, _ in matched) + " at scales "
+              + " / ".join(f"{s:g}" for _, _, s in matched) + " (coverage "
+              + " / ".join(f"{100 * c:.1f}" for _, c, _ in matched) + " %); the estimator's median width over it: "
+              + " / ".join(f"{fig['median_width'][k] / float(np.median(w)):.2f}" if np.isfinite(np.median(w))
+                           and np.median(w) > 0 else "-" for k, (w, _, _) in enumerate(matched)))
         for k, ax in enumerate("xyz"):
             h = half[:, k]
             best = median_width(2.0 * h)

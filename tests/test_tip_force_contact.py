@@ -3,6 +3,8 @@ without a substep-to-substep oscillation (the recorded ``f_tip`` is the force th
 and the tip force estimate kept to the set of forces consistent with the sample
 (``consistent_tip_force``, ``least_squares_in_set``) instead of a guess at the resting
 joints' friction."""
+import math
+
 import numpy as np
 import pytest
 
@@ -243,3 +245,30 @@ def test_causal_fair_bound_takes_its_tolerances_from_free_air_only(dig_start):
     width, covered, tol_used = B.causal_fair_bounds(d, every=2, tol=tol)
     assert np.array_equal(tol_used, tol) and covered.shape == (3,)
     assert width.shape == (len(np.flatnonzero(on)[::2]), 3) and np.all(np.isfinite(width)) and np.all(width >= 0)
+
+
+def test_the_causal_bound_at_coverage_takes_per_axis_the_smallest_scale_that_covers(monkeypatch):
+    """``causal_bounds_at_coverage`` (the yardstick the estimator's width is judged
+    against at equal coverage): per axis the first of the scales at which the bound holds
+    the truth at the target share, its widths there; nan where no scale reaches it; and
+    no further scale is tried once every axis has its own (the bound runs the observer
+    over the recording at each)."""
+    B = _bounds_script()
+    tried = []
+    cover = {1.0: (0.97, 0.90, 0.50), 1.5: (0.98, 0.95, 0.60), 2.0: (0.99, 0.97, 0.70)}
+
+    def fake(d, every, ex, tol):
+        scale = float(tol[0])
+        tried.append(scale)
+        return np.full((4, 3), 10.0 * scale), np.array(cover[scale]), tol
+
+    monkeypatch.setattr(B, "free_air_tolerances", lambda d, ex: np.ones(4))
+    monkeypatch.setattr(B, "causal_fair_bounds", fake)
+    out = B.causal_bounds_at_coverage(None, scales=(1.0, 1.5, 2.0))
+    assert [s for _, _, s in out[:2]] == [1.0, 1.5] and math.isnan(out[2][2])
+    assert out[0][0][0] == 10.0 and out[1][0][0] == 15.0 and out[1][1] == 0.95
+    assert tried == [1.0, 1.5, 2.0]
+    tried.clear()
+    cover[1.5] = (0.98, 0.95, 0.96)
+    out = B.causal_bounds_at_coverage(None, scales=(1.0, 1.5, 2.0))
+    assert [s for _, _, s in out] == [1.0, 1.5, 1.5] and tried == [1.0, 1.5]
