@@ -9,7 +9,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
@@ -258,18 +257,15 @@ def test_22_sigint_during_record_marks_it_interrupted(tmp_path, fmu):
 
 def test_22_sigint_during_campaign_says_interrupted(runs, tmp_path):
     manifest = tmp_path / "manifest.csv"
-    # four cases one after the other (some 3 s each): the Ctrl-C lands while one runs even
-    # where a loaded machine lets the test see the progress line seconds late
-    rows = []
-    for m in "ABCD":
-        for role, name in (("fit", "fit"), ("holdout", "hold")):
-            for src in runs.glob(f"{name}.*"):              # the recording and its sidecar, if any
-                shutil.copy(src, tmp_path / f"{m}_{src.name}")
-            rows.append(f"{m},2025-01-06,{role},{tmp_path / f'{m}_{name}.csv'}\n")
-    manifest.write_text("machine,date,role,recording\n" + "".join(rows))
+    manifest.write_text(f"machine,date,role,recording\nA,2025-01-06,fit,{runs / 'fit.csv'}\n"
+                        f"A,2025-01-06,holdout,{runs / 'hold.csv'}\n")
+    # as a terminal's foreground job gets it: SIGINT at its default (a job started in the
+    # background of a non-interactive shell inherits it ignored, as POSIX has it, and
+    # Python then installs no KeyboardInterrupt: the suite run that way saw the case end)
     proc = subprocess.Popen([sys.executable, "-m", "boomfmi.cli", "campaign", str(manifest), "--out",
                              str(tmp_path / "camp"), "--workers", "1"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     seen = []
     started = threading.Event()
 
