@@ -351,9 +351,9 @@ F_GUESS = 20.0
 #: any width, 7.2 % with this).
 HOLD_WIDTH = 100.0
 #: [1] A direction counts as felt by the sliding joints' equations where the singular
-#: value of their rows (each scaled to unit length) along it exceeds this (about 6 deg
-#: off a row's direction): :func:`consistent_tip_force` holds the last value there
-#: only as firmly as along its least-held world axis.
+#: value of their rows (each scaled to unit length) along it exceeds this (two rows
+#: closer than about 8 deg feel one direction, not two): :func:`consistent_tip_force`
+#: holds the last value there only as firmly as along its least-held world axis.
 HOLD_FELT = 0.1
 #: [s] The estimate's first-order low-pass (after :func:`consistent_tip_force`): the
 #: angles' acceleration noise through the 15 Hz filters is the error left where every
