@@ -1,6 +1,5 @@
 """Diagnosis per joint of excavator recordings (``diagnose/joints.py``: fitted on a fit
-recording, scored on a holdout), and the tip force from the informative joints on the
-soil contact scenarios."""
+recording, scored on a holdout)."""
 import json
 from pathlib import Path
 
@@ -9,7 +8,6 @@ import pytest
 
 from boomfmi import experiments as E
 from boomfmi.diagnose.joints import diagnose_joints
-from boomfmi.physics.force_estimation import estimate_tip_force
 from boomfmi.rig import run_excavator_offline
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "rig"
@@ -46,19 +44,4 @@ def test_a_sensor_rail_is_no_gap_and_noise_is_no_rail():
     assert np.array_equal(as_sensed(top, model), top)
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("name", ["hard_soil"])     # soft_soil (7.5 %) left out for the suite's time budget
-def test_tip_force_where_determined_within_10_percent(name):
-    """The informative joints' estimate, where it reports a component (z: boom, arm and
-    bucket sliding; x and y never while the swing is on its stop), within 10 % of the
-    peak (RMSE)."""
-    cmd = E.digging_cycle()
-    d = run_excavator_offline({"machine": "excavator", "contact": E.contact(name).config()}, cmd, cmd.duration)
-    f, _, _ = estimate_tip_force(d, cannot_tell=True)
-    ft = d[["f_tip_x", "f_tip_y", "f_tip_z"]].to_numpy()
-    on = np.linalg.norm(ft, axis=1) > 0.5
-    known = ~np.isnan(f[:, 2])
-    assert (known & on).sum() > 0.04 * on.sum()
-    rmse = np.sqrt(np.mean((f[known, 2] - ft[known, 2]) ** 2))
-    assert rmse < 0.1 * np.max(np.abs(ft[:, 2]))
-    assert np.all(np.isnan(f[on, 0])) and np.all(np.isnan(f[on, 1]))
+# (the tip force where the informative joints determine it, on the soils: tests/test_excavator_identify_force.py)
