@@ -186,7 +186,7 @@ def tip_force(args):
         print(f"    free air ({int(free.sum())} samples, no contact): the estimate's false force RMS x / y / z "
               + " / ".join(f"{v:.2f}" for v in false) + " N; the whole run's RMSE over each axis' own peak "
               + " / ".join(f"{100 * v:.1f}" for v in whole) + " %")
-        matched = causal_bounds_at_coverage(d, args.every)
+        matched = causal_bounds_at_coverage(d, args.every, tol=causal_tol, at_tol=(causal, causal_cov))
         print("    the causal fair bound at >= 95 % coverage per axis (its free-air tolerances scaled until the truth "
               "lies in it at 95 % of the contact samples): median width x / y / z "
               + " / ".join(median_width(w) for w, _, _ in matched) + " at scales "

@@ -41,7 +41,6 @@ samples, where the tip force is zero and known; never the truth in contact).
     .venv/bin/python benchmarks/excavator_tip_force_bounds.py [--every 5] [--tol 2] [--no-fair]
 """
 import argparse
-
 import math
 
 import numpy as np
@@ -303,7 +302,7 @@ COVERAGE_SCALES = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0)
 
 
 def causal_bounds_at_coverage(d, every: int = 5, ex: exc.Excavator | None = None, target: float = 0.95,
-                              scales=COVERAGE_SCALES):
+                              scales=COVERAGE_SCALES, tol=None, at_tol=None):
     """The causal fair bound (:func:`causal_fair_bounds`) at the coverage the estimator
     must reach: per world axis, the free-air tolerances scaled by the smallest of
     ``scales`` at which the truth lies in the bound at ``target`` of the contact samples
@@ -312,12 +311,17 @@ def causal_bounds_at_coverage(d, every: int = 5, ex: exc.Excavator | None = None
     a narrower width there is not a width the estimator could have had).  Returns per
     axis ``(widths, coverage, scale)``: the widths (m,) [N] at that scale (``inf`` where
     open), its coverage and the scale (``nan`` and the last scale's figures where none
-    reaches ``target``)."""
+    reaches ``target``).  ``tol`` (4,) [N]: the free-air tolerances if already known;
+    ``at_tol``: :func:`causal_fair_bounds`' ``(width, covered)`` at them, if already run
+    (the scale 1 is then not run again)."""
     ex = exc.Excavator() if ex is None else ex
-    tol = free_air_tolerances(d, ex)
+    tol = free_air_tolerances(d, ex) if tol is None else np.asarray(tol, float)
     out = [None, None, None]
     for scale in scales:
-        width, covered, _ = causal_fair_bounds(d, every, ex, tol=scale * tol)
+        if scale == 1.0 and at_tol is not None:
+            width, covered = at_tol
+        else:
+            width, covered, _ = causal_fair_bounds(d, every, ex, tol=scale * tol)
         for k in range(3):
             if out[k] is None and covered[k] >= target:
                 out[k] = (width[:, k], float(covered[k]), scale)
