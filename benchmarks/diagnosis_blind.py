@@ -43,8 +43,19 @@ The diagnoses run through ``boomfmi campaign``'s path (``boomfmi.campaign``: a m
 per case, on a Dask LocalCluster of ``--workers`` processes, each case's outputs in
 ``--cache``/campaign/cases/); the recordings are made before, in as many processes.
 
+The next experiment (``--propose``, issue 35): every case whose diagnosis cannot decide
+(``diagnose.propose.ambiguous`` on its probabilities: the two most probable within a
+factor of 10, or ``unexplained`` the most probable) is diagnosed again with ``propose=``
+(the report's ``--propose next.csv``); the proposed command is recorded on the case's
+own machine (the hybrid rig with the case's load, effects, disturbances and sensor, a
+noise draw of its own), added to the fit recordings, and the case diagnosed a third
+time.  Detectable then means: beyond the margin on the holdout, and on the fit recording
+or the proposed one.  Prints, per ambiguous case, the verdict before and after against
+the truth, and the share of ambiguous cases whose verdict is correct after (target: 3
+of 4); writes ``<out>_propose.json`` beside the note.
+
     python benchmarks/diagnosis_blind.py [--suite blind|calibration] [--cases 60] [--workers 2]
-                                         [--only 3 7] [--resume]
+                                         [--only 3 7] [--resume] [--propose]
 """
 from __future__ import annotations
 
@@ -447,6 +458,9 @@ def main(argv=None) -> int:
     ap.add_argument("--resume", action="store_true",
                     help="keep the diagnoses of an earlier run whose recordings are the same (default: diagnose "
                          "anew, as the benchmark measures the code as it is)")
+    ap.add_argument("--propose", action="store_true",
+                    help="then, for each ambiguous case, record the proposed experiment on the case's machine and "
+                         "diagnose again with it among the fit recordings (issue 35's target: 3 of 4 correct)")
     args = ap.parse_args(argv)
     from boomfmi.campaign import run_campaign, write_manifest   # (Dask: only where cases are diagnosed)
     calibration = args.suite == "calibration"
@@ -594,7 +608,80 @@ def main(argv=None) -> int:
     else:
         args.out.with_suffix(".json").write_text(json.dumps(results, indent=1, default=str))
     print(f"wrote {args.out}")
+    if args.propose:
+        by_case = {c["case"]: (c, info) for c, info in zip(cases, infos)}
+        rows = [proposed_case(*by_case[r["case"]], r, args.cache, args.workers)
+                for r in results if ambiguous_pair(r["probabilities"]) is not None]
+        decided = [r for r in rows if r["after"] is not None]
+        ok = sum(r["correct_after"] for r in decided)
+        print(f"ambiguous cases: {len(rows)} of {len(results)}; an experiment proposed for {len(decided)}; "
+              f"correct after recording it: {ok} of {len(decided)}"
+              + (f" ({100 * ok / len(decided):.0f} %, target 75 %)" if decided else "")
+              + f"; correct before: {sum(r['correct_before'] for r in rows)} of {len(rows)}")
+        target = args.out.with_name(args.out.stem + "_propose.json")
+        target.write_text(json.dumps(rows, indent=1, default=str))
+        print(f"wrote {target}")
     return 0
+
+
+def ambiguous_pair(probabilities):
+    """The two explanations a diagnosis' ``probabilities`` leave undecided
+    (``diagnose.propose.ambiguous``), or None."""
+    from boomfmi.diagnose.propose import ambiguous
+    return ambiguous(probabilities or {})
+
+
+def proposed_case(case: dict, info: dict, row: dict, cache: Path, workers: int) -> dict:
+    """An ambiguous case with its proposed experiment: the diagnosis again with
+    ``propose=`` (the command CSV), the command recorded on the case's machine (its own
+    noise draw), the diagnosis with it among the fit recordings, and the verdict after
+    scored with what the proposed recording shows."""
+    from boomfmi.diagnose import diagnose
+    from boomfmi.experiments import profile
+    d = case_dir(case, cache) / "propose"
+    shutil.rmtree(d, ignore_errors=True)
+    d.mkdir(parents=True)
+    fit, hold = case_dir(case, cache) / "fit.csv", case_dir(case, cache) / "hold.csv"
+    t0 = time.perf_counter()
+    first = diagnose([fit], [hold], d / "before", workers=workers, propose=d / "next.csv")
+    out = {"case": case["case"], "kind": case["kind"], "truth": row["truth"], "detectable": row["detectable"],
+           "before": row["verdict"], "correct_before": row["correct"], "p_before": row["probabilities"],
+           "proposed": None, "after": None, "correct_after": False}
+    nxt = first.get("next_experiment") or {}
+    if not nxt.get("needed") or not (d / "next.csv").exists():
+        print(f"case {case['case']}: ambiguous in the benchmark's run, but its diagnosis again proposes nothing "
+              f"(verdict {label(first['verdict'])})", flush=True)
+        return out
+    out["proposed"] = {k: nxt.get(k) for k in ("design", "params", "hypotheses", "separation")}
+    prof = profile(str(d / "next.csv"))
+    seed = case["seed"] + 7
+    frame = hr.simulate(_plant(case), prof, seed=seed)
+    hr.write(d / "proposed.csv", frame)
+    # what the proposed recording shows of each thing that is wrong (as make_recordings
+    # measures the fit recording): detectable now if beyond the margin on the holdout and
+    # on the fit recording or this one
+    margin = NOISE_FACTOR * sum(noise_floor(read_recording(d / "proposed.csv")).values()) + ABS_FLOOR
+    shown = {}
+    for n in case["effects"]:
+        without = hr.simulate(_plant(case, {k: v for k, v in case["effects"].items() if k != n}), prof, seed=seed)
+        shown[n] = _true_errors(frame, without)
+    for n in case["disturbances"]:
+        shown[n] = _true_errors(frame, hr.simulate(_plant(case, disturbances={}), prof, seed=seed))
+    on_fit = {n: max(info["difference_fit"][n] / info["margin_fit"], shown[n] / margin) for n in shown}
+    widened = dict(info, difference_fit=on_fit, margin_fit=1.0)
+    full, seen = truth_of(case, widened)
+    after = diagnose([fit, d / "proposed.csv"], [hold], d / "after", workers=workers)
+    verdict = sorted(after["verdict"])
+    out.update(after=verdict, p_after=after.get("probabilities"), detectable_after=seen,
+               correct_after=verdict == seen or verdict == full, wall_s=time.perf_counter() - t0,
+               shown_by_proposal={n: round(shown[n] / margin, 3) for n in shown})
+    p = out["proposed"]
+    print(f"case {case['case']:3d} truth {label(full)}: before {label(row['verdict'])} "
+          f"({'ok' if row['correct'] else 'WRONG'}); proposed {p['design']} {p['params']} to tell "
+          f"{p['hypotheses'][0]} from {p['hypotheses'][1]} (separation {p['separation']:.3g}); after "
+          f"{label(verdict)}, detectable now {label(seen)}: {'CORRECT' if out['correct_after'] else 'wrong'} "
+          f"({out['wall_s']:.0f} s)", flush=True)
+    return out
 
 
 if __name__ == "__main__":

@@ -77,3 +77,52 @@ def test_a_start_seen_through_a_coarse_angle_sensor_reads_F_s_at_the_edge_and_st
     assert F_s.ci95[0] <= load["F_s"] <= F_s.ci95[1]
     for k in ("K_v", "F_d", "F_L", "M"):
         assert res.params[k].value == pytest.approx(load[k], rel=0.05), k
+
+
+def test_a_start_between_samples_runs_from_its_crossing_by_linearity():
+    """A level crossed a share ``frac`` into the interval before sample k starts there:
+    at frac 0 it is the run from sample k-1, at 1 the run from k, in between the exact
+    run from rest under a held force (Eq. 8's velocity, trapezoid displacement)."""
+    from boomfmi import physics as ph
+    from boomfmi.identify.fit import _started_between
+    K_v, M, dt, n = 2800.0, 22.0, 1e-3, 40
+    F_net = np.full(n, 150.0)                      # a held net force [N] over the window
+
+    def from_rest(t0_steps: float) -> np.ndarray:
+        # the closed form from rest at t0: x = F/K_v (s - M/K_v (1 - exp(-K_v s / M))), s = t - t0
+        s = np.maximum(np.arange(n) - t0_steps, 0.0) * dt
+        return F_net[0] / K_v * (s - M / K_v * -np.expm1(-K_v * s / M))
+
+    rows = np.zeros((n, n))
+    for s0 in range(n - 1):
+        v = ph.sliding_velocity(0.0, F_net[s0:], K_v, M, dt)
+        rows[s0, s0 + 1:] = np.cumsum(0.5 * (v[:-1] + v[1:])) * dt
+    k = np.array([10, 10, 10])
+    frac = np.array([0.0, 0.4, 1.0])
+    out = _started_between(rows, k, frac, F_net, K_v, M, dt)
+    np.testing.assert_allclose(out[0], rows[9], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(out[2], rows[10], rtol=1e-12, atol=1e-15)
+    # in between: the closed form from 9.4 samples, as closely as the rows themselves
+    # follow theirs (the trapezoid's error), and between its neighbours
+    own = np.max(np.abs(rows[9] - from_rest(9.0)))
+    assert np.max(np.abs(out[1] - from_rest(9.4))) <= 1.5 * own
+    assert np.max(np.abs(out[1] - from_rest(9.4))) < 0.1 * np.max(np.abs(from_rest(9.4) - from_rest(9.0)))
+    assert np.all(out[1] <= rows[9] + 1e-15) and np.all(out[1] >= rows[10] - 1e-15)
+
+
+def test_the_start_likelihood_is_a_normal_density_whose_spread_grows_with_the_displacement():
+    """Without rounding, the start's log-likelihood is the normal log-density of the
+    readings about the simulated displacement, its spread the sensor's noise, the
+    simulation's floor and MODEL_SHARE of the displacement, normalised: a larger
+    simulated displacement does not buy a better fit by widening its own spread."""
+    from scipy.stats import norm
+    from boomfmi.identify.fit import MODEL_SHARE, MODEL_SPREAD, _start_likelihood
+    rng = np.random.default_rng(3)
+    moved = np.array([np.linspace(0.0, 2e-3, 30), np.linspace(0.0, 4e-3, 30)])
+    spread = 5e-5
+    readings = 0.01 + moved[0] + spread * rng.standard_normal(30)
+    ll = _start_likelihood(moved, readings, 0.01, 0.0, spread)
+    sigma = np.sqrt(spread ** 2 + MODEL_SPREAD ** 2 + (MODEL_SHARE * moved) ** 2)
+    expected = norm.logpdf(readings, 0.01 + moved, sigma).sum(axis=1) + 0.5 * np.log(2 * np.pi) * 30
+    np.testing.assert_allclose(ll, expected, rtol=1e-10)
+    assert ll[0] > ll[1] + 100.0

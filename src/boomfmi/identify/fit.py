@@ -25,8 +25,10 @@ Three stages, on every recording given together:
 3. **Static friction from every start** (:func:`static_friction`).  Each run that
    follows a rest (in mid-stroke after a hold, after a stop, or from an end stop)
    starts when the drive force reaches F_s cos(phi).  For every F_s on a grid, the run
-   is simulated from that instant (stage 2's filter) and matched to the measured
-   velocity; the profile of that cost over F_s gives F_s and its interval.  The
+   is simulated from that instant (stage 2's filter), between samples where the force
+   crosses F_s between them, and its displacement matched to the measured position
+   (a likelihood whose spread is the sensor's and MODEL_SHARE of the displacement);
+   the posterior over F_s gives F_s and its interval.  The
    largest drive force the piston held at rest in mid-stroke is a lower bound.  Where
    the starts do not pin F_s down (the drive force jumps through the static band
    within a sample or two, as in a start under full pressure), the interval says so
@@ -464,6 +466,12 @@ GRID_TOP = 4.0
 #: parameters' errors), and how many samples' misfits count as one (their errors are
 #: correlated): the likelihood's spread and tempering.
 MODEL_SPREAD = 2e-6
+#: and its share of the displacement simulated from the start: a start's displacement
+#: from rest, ``x = F t^2 / (2 M)`` for an excess force F, is no surer than the mass
+#: (M's systematic share, :data:`SYSTEMATIC`).  Without it, on a steep rise of the drive
+#: force a displacement a few tenths of a per cent off moved the start by a sample and
+#: F_s by 1 to 3 %, low on average (benchmarks/excavator_identification.py --noise-seeds).
+MODEL_SHARE = SYSTEMATIC["M"]
 TEMPER = 4.0
 OUTLIER = 1e-4   #: probability of a reading no model explains (a glitch)
 STRAY = 0.05     #: probability that a start is not what the model makes of it
@@ -514,7 +522,7 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
     runs with the mass where it starts).  ``base["F_unsure"]`` (optional, one array per
     motion) [N]: how far the net force at each sample is unsure (a linkage's terms from
     every joint's filtered motion); a rest's force counts towards the lower bound only
-    beyond it, and a start's evidence is blurred by its largest value over the start.
+    beyond it, and a start's evidence is blurred by its root mean square over the start.
     Returns ``(Estimate or None, identified, details)``."""
     M, K_v, F_d, F_L = (base[k] for k in ("M", "K_v", "F_d", "F_L"))
     mass_at = (lambda ri, j: float(M[ri][j])) if isinstance(M, (list, tuple)) else (lambda ri, j: float(M))
@@ -547,7 +555,10 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
             need = d * level_start[j:ie] - (raised_start[j:ie] if c else 0.0)
             rest = p.x_raw[j:max(j + 1, i0 - int(0.01 * p.fs))]
             q = _quantum(p.x_raw[j:min(len(p.x_raw), ie + int(0.05 * p.fs))])
-            unsure_start = (float(np.max((base["F_unsure"][ri] / np.cos(p.phi))[j:ie + 1]))
+            # a start's drive force is unsure by the linkage's terms over its window: their
+            # root mean square (the largest overstates it two to three times: the terms
+            # peak where the other joints accelerate hardest, not all through a start)
+            unsure_start = (float(np.sqrt(np.mean((base["F_unsure"][ri] / np.cos(p.phi))[j:ie + 1] ** 2)))
                             if "F_unsure" in base else 0.0)
             events.append(dict(need=need, n=ie - j, r=r, j=j, ie=ie, d=d, t=float(p.t[i0]),
                                reading=float(np.median(rest)), q=q, spread=float(np.std(rest)),
@@ -584,9 +595,11 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
                     out[row, s0 + 1:] = np.cumsum(0.5 * (v[:-1] + v[1:])) * dt
             return out
         if v_s <= 0.0:
+            # each level's start between samples, simulated: the run from the sample
+            # after its crossing, plus what the force held over the crossing's remainder
+            # of the interval adds (Eq. 8 is linear in the velocity while sliding one way)
             F_net = _net_force(r, j, ie, d, F_d, F_L, c=c, pressure=pressure)
-            ll_k = like(moved_from(range(n), [F_net] * n))
-            ll = (1.0 - frac) * ll_k[np.clip(k - 1, 0, n - 1)] + frac * ll_k[k]
+            ll = like(_started_between(moved_from(range(n), [F_net] * n), k, frac, F_net, K_v, e["M"], dt))
         else:
             # each candidate F_s its own friction history: from it at rest, falling
             # towards F_d along the Stribeck curve as the measured speed grows
@@ -666,6 +679,26 @@ def upper_edge(grid: np.ndarray, log_post: np.ndarray, drop: float | None = None
     return float(grid[i - 1] + (a / b if np.isfinite(b) and b > 0.0 else 0.0) * (grid[i] - grid[i - 1]))
 
 
+def _started_between(moved: np.ndarray, k: np.ndarray, frac: np.ndarray, F_net: np.ndarray,
+                     K_v: float, M: float, dt: float) -> np.ndarray:
+    """The displacements [m] of starts between samples: for each level, its run from
+    rest at sample ``k`` (row ``k`` of ``moved``, one row per start sample), plus the
+    velocity and displacement the net force ``F_net[k-1]`` [N] gives it over the
+    remainder ``(1 - frac) dt`` of the interval from its crossing to sample ``k`` (Eq. 8
+    from rest), carried on as a free response (Eq. 8's velocity is linear in its initial
+    value while sliding one way: ``v[k+m] = e^m v_k``, ``e = exp(-K_v dt / M)``,
+    integrated by the trapezoid as ``moved``'s rows are).  Where the crossing falls in
+    the window's last interval or beyond (``frac`` 1), the row as it is."""
+    n = moved.shape[1]
+    tau = (1.0 - frac) * dt
+    v_k = -np.expm1(-K_v * tau / M) * F_net[np.clip(k - 1, 0, n - 1)] / K_v
+    decay = ph.sliding_velocity(1.0, np.zeros(n), K_v, M, dt)        # e^m from 1 at the start
+    free = np.concatenate(([0.0], np.cumsum(0.5 * (decay[:-1] + decay[1:])) * dt))
+    since = np.arange(n)[None, :] - k[:, None]
+    extra = np.where(since >= 0, (0.5 * v_k * tau)[:, None] + v_k[:, None] * free[np.clip(since, 0, n - 1)], 0.0)
+    return moved[k] + extra
+
+
 def _blurred(post: np.ndarray, width: float) -> np.ndarray:
     """A distribution over an even grid convolved with a normal distribution of standard
     deviation ``width`` [grid steps] (mass beyond the grid's ends kept at them)."""
@@ -694,13 +727,15 @@ def _start_likelihood(moved: np.ndarray, readings: np.ndarray, reading: float, q
     reading at rest) is unknown: uniform over a quantum (two where noise makes the
     rest flicker), and marginalised, not profiled: a profile would favour starts that
     one offset or another can excuse."""
-    sigma = math.hypot(spread, q / 20.0, MODEL_SPREAD)
-    if q <= 0.0:
-        # a simulated start that ran away (displacements beyond any float's square) is
-        # impossible, log-likelihood -inf, not an overflow warning
-        with np.errstate(over="ignore", invalid="ignore"):
-            ll = -np.sum((reading + moved - readings) ** 2, axis=1) / (2.0 * sigma ** 2)
-        return np.where(np.isnan(ll), -np.inf, ll)
+    # the simulation's spread: MODEL_SPREAD, and MODEL_SHARE of the displacement itself
+    # (a simulated start from rest is no surer than the mass it accelerates); a start
+    # that ran away (displacements beyond any float's square) is impossible,
+    # log-likelihood -inf, not an overflow warning
+    with np.errstate(over="ignore", invalid="ignore"):
+        sigma = np.sqrt(spread ** 2 + (q / 20.0) ** 2 + MODEL_SPREAD ** 2 + (MODEL_SHARE * moved) ** 2)
+        if q <= 0.0:
+            ll = -np.sum((reading + moved - readings) ** 2 / (2.0 * sigma ** 2) + np.log(sigma), axis=1)
+            return np.where(np.isnan(ll), -np.inf, ll)
     span = 1.0 if spread < q / 4.0 else 2.0
     lls = []
     for offset in np.linspace(-0.5, 0.5, 11) * q * span:
