@@ -536,7 +536,7 @@ def main(argv=None) -> int:
               f"calibrated: {({True: 'yes', False: 'NO', None: 'not decided (no bin of 10 cases)'})[cal['calibrated']]}")
     command = (f"python benchmarks/diagnosis_blind.py {'--suite calibration ' if calibration else ''}"
                + (f"--only {' '.join(str(c['case']) for c in cases)}" if args.only is not None
-                  else f"--cases {len(results)}"))
+                  else f"--cases {len(results)}") + (" --propose" if args.propose else ""))
     lines = ["# Diagnosis: " + ("calibration of the probabilities" if calibration else "blind benchmark"), "",
              f"Made by `{command}` on {platform.machine()} / "
              f"Python {platform.python_version()} ({time.perf_counter() - t0:.0f} s wall, {args.workers} workers).", "",
@@ -620,8 +620,34 @@ def main(argv=None) -> int:
               + f"; correct before: {sum(r['correct_before'] for r in rows)} of {len(rows)}")
         target = args.out.with_name(args.out.stem + "_propose.json")
         target.write_text(json.dumps(rows, indent=1, default=str))
-        print(f"wrote {target}")
+        with args.out.open("a") as f:
+            f.write("\n".join(propose_lines(rows, len(results))) + "\n")
+        print(f"wrote {target}, and the table in {args.out}")
     return 0
+
+
+def propose_lines(rows, n_cases: int) -> list[str]:
+    """The note's section on the ambiguous cases and their proposed experiments."""
+    decided = [r for r in rows if r["after"] is not None]
+    ok = sum(r["correct_after"] for r in decided)
+    out = ["", "## The next experiment on the ambiguous cases (`--propose`)", "",
+           f"{len(rows)} of {n_cases} diagnoses could not decide (their two most probable explanations within a "
+           "factor of 10, or `unexplained` the most probable); each was diagnosed again with `propose=`, the "
+           "proposed command recorded on the case's machine (this simulator, a noise draw of its own) and added "
+           "to the fit recordings, and the case diagnosed again. Detectable after: beyond the margin on the "
+           "holdout, and on the fit recording or the proposed one.", "",
+           f"**Correct after the proposed experiment: {ok} of {len(decided)}** (target 3 of 4); correct before: "
+           f"{sum(r['correct_before'] for r in rows)} of {len(rows)}.", "",
+           "| case | truth | before | proposed (design, to tell apart) | after | detectable after | |",
+           "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        p = r["proposed"]
+        what = "-" if p is None else f"{p['design']} {p['params']}: {p['hypotheses'][0]} / {p['hypotheses'][1]}"
+        out.append(f"| {r['case']} | {label(r['truth'])} | {label(r['before'])}"
+                   f"{'' if r['correct_before'] else ' (wrong)'} | {what} | "
+                   f"{'-' if r['after'] is None else label(r['after'])} | {label(r.get('detectable_after') or [])} | "
+                   f"{'correct' if r['correct_after'] else 'wrong'} |")
+    return out
 
 
 def ambiguous_pair(probabilities):
