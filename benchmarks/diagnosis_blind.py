@@ -293,12 +293,7 @@ def make_recordings(case: dict, cache: Path) -> dict:
         frame = hr.simulate(plant, prof, seed=seed)
         hr.write(d / f"{key}.csv", frame)
         noise = sum(noise_floor(read_recording(d / f"{key}.csv")).values())
-        diffs = {}
-        for n in case["effects"]:
-            without = hr.simulate(_plant(case, {k: v for k, v in case["effects"].items() if k != n}), prof, seed=seed)
-            diffs[n] = _true_errors(frame, without)
-        for n in case["disturbances"]:
-            diffs[n] = _true_errors(frame, hr.simulate(_plant(case, disturbances={}), prof, seed=seed))
+        diffs = differences(case, prof, seed, frame)
         suffix = "" if key == "hold" else "_fit"
         info["difference" + suffix] = diffs
         info["margin" + suffix] = NOISE_FACTOR * noise + ABS_FLOOR
@@ -306,6 +301,18 @@ def make_recordings(case: dict, cache: Path) -> dict:
     info["scoring"] = SCORING
     meta.write_text(json.dumps(info, indent=1))
     return info
+
+
+def differences(case: dict, prof, seed: int, frame) -> dict:
+    """How much each thing wrong in ``case`` changes the run ``frame`` of ``prof`` (noise
+    seed ``seed``) on the case's plant: {name: :func:`_true_errors` against the run without it}."""
+    out = {}
+    for n in case["effects"]:
+        without = hr.simulate(_plant(case, {k: v for k, v in case["effects"].items() if k != n}), prof, seed=seed)
+        out[n] = _true_errors(frame, without)
+    for n in case["disturbances"]:
+        out[n] = _true_errors(frame, hr.simulate(_plant(case, disturbances={}), prof, seed=seed))
+    return out
 
 
 def truth_of(case: dict, info: dict, fit_too: bool = True) -> tuple[list, list]:
@@ -687,12 +694,7 @@ def proposed_case(case: dict, info: dict, row: dict, cache: Path, workers: int) 
     # measures the fit recording): detectable now if beyond the margin on the holdout and
     # on the fit recording or this one
     margin = NOISE_FACTOR * sum(noise_floor(read_recording(d / "proposed.csv")).values()) + ABS_FLOOR
-    shown = {}
-    for n in case["effects"]:
-        without = hr.simulate(_plant(case, {k: v for k, v in case["effects"].items() if k != n}), prof, seed=seed)
-        shown[n] = _true_errors(frame, without)
-    for n in case["disturbances"]:
-        shown[n] = _true_errors(frame, hr.simulate(_plant(case, disturbances={}), prof, seed=seed))
+    shown = differences(case, prof, seed, frame)
     on_fit = {n: max(info["difference_fit"][n] / info["margin_fit"], shown[n] / margin) for n in shown}
     widened = dict(info, difference_fit=on_fit, margin_fit=1.0)
     full, seen = truth_of(case, widened)
