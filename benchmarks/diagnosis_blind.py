@@ -78,6 +78,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import hybrid_rig as hr  # noqa: E402
 from boomfmi.diagnose.attribute import ABS_FLOOR, NOISE_FACTOR, noise_floor  # noqa: E402
+from boomfmi.diagnose.propose import ambiguous  # noqa: E402
 from boomfmi.experiments import (joystick, manoeuvres, paper_multistep, pseudo_random_steps,  # noqa: E402
                                  random_steps, sine_sweep, slow_ramps)
 from boomfmi.recording import read_recording  # noqa: E402
@@ -618,13 +619,12 @@ def main(argv=None) -> int:
     if args.propose:
         by_case = {c["case"]: (c, info) for c, info in zip(cases, infos)}
         rows = [proposed_case(*by_case[r["case"]], r, args.cache, args.workers)
-                for r in results if ambiguous_pair(r["probabilities"]) is not None]
-        decided = [r for r in rows if r["after"] is not None]
-        ok = sum(r["correct_after"] for r in decided)
-        print(f"ambiguous cases: {len(rows)} of {len(results)}; an experiment proposed for {len(decided)}; "
-              f"correct after recording it: {ok} of {len(decided)}"
-              + (f" ({100 * ok / len(decided):.0f} %, target 75 %)" if decided else "")
-              + f"; correct before: {sum(r['correct_before'] for r in rows)} of {len(rows)}")
+                for r in results if ambiguous(r["probabilities"] or {}) is not None]
+        decided, ok, before = propose_counts(rows)
+        print(f"ambiguous cases: {len(rows)} of {len(results)}; an experiment proposed for {decided}; "
+              f"correct after recording it: {ok} of {decided}"
+              + (f" ({100 * ok / decided:.0f} %, target 75 %)" if decided else "")
+              + f"; correct before: {before} of {len(rows)}")
         target = args.out.with_name(args.out.stem + "_propose.json")
         target.write_text(json.dumps(rows, indent=1, default=str))
         with args.out.open("a") as f:
@@ -633,18 +633,24 @@ def main(argv=None) -> int:
     return 0
 
 
+def propose_counts(rows) -> tuple[int, int, int]:
+    """Of the ambiguous cases' rows: how many had an experiment proposed and recorded,
+    how many of those are correct after it, how many were correct before."""
+    decided = [r for r in rows if r["after"] is not None]
+    return len(decided), sum(r["correct_after"] for r in decided), sum(r["correct_before"] for r in rows)
+
+
 def propose_lines(rows, n_cases: int) -> list[str]:
     """The note's section on the ambiguous cases and their proposed experiments."""
-    decided = [r for r in rows if r["after"] is not None]
-    ok = sum(r["correct_after"] for r in decided)
+    decided, ok, before = propose_counts(rows)
     out = ["", "## The next experiment on the ambiguous cases (`--propose`)", "",
            f"{len(rows)} of {n_cases} diagnoses could not decide (their two most probable explanations within a "
            "factor of 10, or `unexplained` the most probable); each was diagnosed again with `propose=`, the "
            "proposed command recorded on the case's machine (this simulator, a noise draw of its own) and added "
            "to the fit recordings, and the case diagnosed again. Detectable after: beyond the margin on the "
            "holdout, and on the fit recording or the proposed one.", "",
-           f"**Correct after the proposed experiment: {ok} of {len(decided)}** (target 3 of 4); correct before: "
-           f"{sum(r['correct_before'] for r in rows)} of {len(rows)}.", "",
+           f"**Correct after the proposed experiment: {ok} of {decided}** (target 3 of 4); correct before: "
+           f"{before} of {len(rows)}.", "",
            "| case | truth | before | proposed (design, to tell apart) | after | detectable after | |",
            "|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -655,13 +661,6 @@ def propose_lines(rows, n_cases: int) -> list[str]:
                    f"{'-' if r['after'] is None else label(r['after'])} | {label(r.get('detectable_after') or [])} | "
                    f"{'correct' if r['correct_after'] else 'wrong'} |")
     return out
-
-
-def ambiguous_pair(probabilities):
-    """The two explanations a diagnosis' ``probabilities`` leave undecided
-    (``diagnose.propose.ambiguous``), or None."""
-    from boomfmi.diagnose.propose import ambiguous
-    return ambiguous(probabilities or {})
 
 
 def proposed_case(case: dict, info: dict, row: dict, cache: Path, workers: int) -> dict:
