@@ -45,10 +45,14 @@ and p_b.
   candidate that lowers the fit recordings' error at all, whatever it does alone to the
   holdout (:func:`pair_combos`: two effects may each explain little alone, or one make
   the holdout worse with the other's misfit around it): both effects and the baseline
-  together (a friction effect's load re-identified with it), from the singles' fits.
-  The cost is capped by a budget: at most ``PAIR_JOBS`` joint fits (as many as the
-  former pool of five candidates allowed), the pairs whose singles lowered the fit
-  error most first, each fit at most ``PAIR_EVALUATIONS`` evaluations.
+  together (a friction effect's load re-identified with it), from the singles' fits
+  (:func:`fit_pair_jointly`).  The cost is capped by a budget: at most ``PAIR_JOBS``
+  joint fits (as many as the former pool of five candidates allowed), the pairs whose
+  singles lowered the fit error most first, each fit at most ``PAIR_EVALUATIONS``
+  evaluations; a pair no start of which lowers the fit error is not fitted, but for the
+  first ``PAIR_ALWAYS``, whose weaker effect is also screened in each of its laws
+  beside the stronger's fit (a single's fit may have absorbed part of the other effect,
+  or taken a law that only fits alone).
 
 The verdict is the most probable explanation (:mod:`.evidence`): every candidate set
 (``none``: the baseline; each effect; each pair fitted) and ``unexplained`` (something
@@ -295,7 +299,7 @@ def _fit_and_score(args):
     # wider one's shape: a slower lag for a speed limit), then all refined together,
     # kept where it fits better and the holdout bears it out (a speed limit the fit
     # recordings never reach is fitted to whatever else they miss)
-    simple = [f for f in forms if not any(laws(g) < laws(f) for g in forms)]
+    simple = simple_laws(forms)
     screens = [(*fit_effects([name], values, fit_recs, fixed=fixed, forms={name: form}, screen_only=True), form)
                for form in simple]
     fx, cost, form = min(screens, key=lambda f: f[1])
@@ -656,6 +660,13 @@ def _weigh(cands, before, base_cost, noise, spread, base, fit_recs, hold_recs) -
 #: the joint fits of pairs at most (as many as the former pool of five candidates
 #: allowed), the most promising first (:func:`pair_combos`)
 PAIR_JOBS = 10
+#: the most promising of them fitted jointly whatever their starts show, the weaker
+#: effect screened in each of its laws beside the stronger (:func:`fit_pair_jointly`'s
+#: ``always``): the two strongest singles' pairings, where a weak second effect hides
+#: behind a strong one's fit (a heat exchange beside a valve's deadband, whose widths
+#: had taken part of it; beside a sensor's lag, in the wall's law where alone it took
+#: the polytropic one)
+PAIR_ALWAYS = 2
 
 
 def pair_combos(cands, base_cost: float, jobs: int = PAIR_JOBS) -> list:
@@ -674,13 +685,14 @@ def pair_combos(cands, base_cost: float, jobs: int = PAIR_JOBS) -> list:
 def _pairs(cands, values, fit_recs, hold_recs, before, workers, base_cost: float) -> list:
     """The pairs of :func:`pair_combos`, each fitted jointly (:func:`_fit_pair`, from the
     singles' fits), as candidates; a pair that does not lower the fit error below its
-    better single's by SCREEN is left out (its evidence could only be its better
-    single's, less the penalty of a further effect)."""
+    better single's by SCREEN from any start is left out (its evidence could only be its
+    better single's, less the penalty of a further effect), but for the first
+    ``PAIR_ALWAYS``, fitted whatever their starts show."""
     combos = pair_combos(cands, base_cost)
     # a pair with a friction effect keeps the load identified with it
     jobs = [([a.name, b.name], a.values or b.values or values, fit_recs, hold_recs,
-             {a.name: a.params, b.name: b.params}, {a.name: a.fit_error, b.name: b.fit_error})
-            for a, b in combos]
+             {a.name: a.params, b.name: b.params}, {a.name: a.fit_error, b.name: b.fit_error}, k < PAIR_ALWAYS)
+            for k, (a, b) in enumerate(combos)]
     out = []
     for job, fitted in zip(jobs, _map(_fit_pair, jobs, workers) if jobs else []):
         if fitted is None:
@@ -707,47 +719,79 @@ def _halved(effect: str, parameter: str, value: float) -> float:
     return max(0.5 * value, q.lower) if q.switch and q.on_min is None else value
 
 
-def _fit_pair(args):
-    """A pair fitted jointly; None where, at its start, the pair does not lower the fit
-    error below its better single's by SCREEN (the second effect adds nothing there,
-    and a joint fit would only chase the noise).
+def simple_laws(forms: list) -> list:
+    """The laws of ``forms`` ([[(parameter, lower, upper, log)]]) that hold no other's
+    parameters (a leak laminar or turbulent, not both; a lag without its speed limit)."""
+    laws = lambda form: {q[0] for q in form}
+    return [f for f in forms if not any(laws(g) < laws(f) for g in forms)]
 
-    Up to three starts, each tried only where the ones before do not lower the fit
-    error by SCREEN, the best kept: both singles' fits; both halved (the parameters
+
+def fit_pair_jointly(names, start: dict, single_costs: dict, forms: dict, weak_laws: dict, cost_of,
+                     always: bool = False):
+    """Two effects fitted jointly on the error ``cost_of(effects) -> float`` (the fit
+    recordings', or a cut of them): ``(effects, cost)``, or None where no start lowers
+    the error below the better single's (``single_costs``) by SCREEN and the pair is
+    not one to fit ``always`` (the second effect adds nothing there, and a joint fit
+    would only chase the noise).
+
+    Up to three kinds of start, each tried only where the ones before do not lower the
+    error by SCREEN, the best kept: both singles' fits (``start``, of the laws
+    ``forms``: {name: [(parameter, lower, upper, log)]}); both halved (the parameters
     whose size is the effect's strength, :func:`_halved`); and the better single's fit
-    held while the other effect's range is screened beside it (forward selection).
-    The first fails where both singles absorbed the same feature (a spool lag and a
-    sensor's dead time each take the whole delay: together they double it), which the
-    second meets; the third, where the weaker is hidden behind the stronger's fit."""
-    names, values, fit_recs, hold_recs, start, single_costs = args
-    forms = {n: [(q.name, q.lower, q.upper, q.log) for q in EFFECTS[n].parameters if q.name in start[n]]
-             for n in names}
+    held while the weaker is screened beside it in each of its ``weak_laws[name]``
+    (forward selection: its own single's law, or each of its simple laws,
+    :func:`simple_laws`).  The first fails where both singles absorbed
+    the same feature (a spool lag and a sensor's dead time each take the whole delay:
+    together they double it), which the second meets; the third, where the weaker is
+    hidden behind the stronger's fit, and in a law of its own there (heat exchanged with
+    the wall beside a sensor's lag, where alone a polytropic exponent took part of the
+    lag's shape).  ``always``: fitted from the best start even where it lowers nothing
+    (the singles' fits may each have absorbed part of the other effect, so that no start
+    near them shows what the joint fit finds)."""
     single_cost = min(single_costs.values())
     strong = min(names, key=lambda n: single_costs[n])
     weak = next(n for n in names if n != strong)
-    at = lambda fx: fit_cost(values, fx, fit_recs)
     enough = (1.0 - SCREEN) * single_cost
-    starts = [(at(start), start)]
+    starts = [(cost_of(start), start, forms)]
     # both singles taking the same feature whole (a delay): each takes half of it
     halves = {n: {q: _halved(n, q, v) for q, v in start[n].items()} for n in names}
     if starts[0][0] > enough and halves != start:
-        starts.append((at(halves), halves))
-    if min(c for c, _ in starts) > enough:   # the weaker hidden behind the stronger: screened beside it
-        held, cost = fit_effects([weak], values, fit_recs, fixed={strong: start[strong]},
-                                 forms={weak: forms[weak]}, screen_only=True)
-        starts.append((cost, held))
-    at_start, start = min(starts, key=lambda s: s[0])
-    if at_start > enough:
+        starts.append((cost_of(halves), halves, forms))
+    if min(s[0] for s in starts) > enough:   # the weaker hidden behind the stronger: screened beside it
+        for law in weak_laws[weak]:
+            held, cost = fit_effects([weak], {}, None, fixed={strong: start[strong]}, forms={weak: law},
+                                     screen_only=True, cost_of=cost_of)
+            starts.append((cost, held, {strong: forms[strong], weak: law}))
+    at_start, begin, laws = min(starts, key=lambda s: s[0])
+    if at_start > enough and not always:
         return None
-    fx, cost = fit_effects(names, values, fit_recs, start=start, max_evaluations=PAIR_EVALUATIONS, forms=forms)
+    fx, cost = fit_effects(list(names), {}, None, start=begin, max_evaluations=PAIR_EVALUATIONS, forms=laws,
+                           cost_of=cost_of)
     if cost > at_start:
-        fx, cost = start, at_start
+        fx, cost = begin, at_start
+    return fx, cost
+
+
+def _fit_pair(args):
+    """A pair fitted jointly on the fit recordings (:func:`fit_pair_jointly`) and scored
+    on the holdout; None where it is not fitted."""
+    names, values, fit_recs, hold_recs, start, single_costs, always = args
+    forms = {n: [(q.name, q.lower, q.upper, q.log) for q in EFFECTS[n].parameters if q.name in start[n]]
+             for n in names}
+    # the weaker screened in each of its laws for the pairs fitted always, in its own
+    # single's law for the rest (their screen only decides whether to fit them)
+    laws = {n: simple_laws(_laws(EFFECTS[n])) if always else [forms[n]] for n in names}
+    fitted = fit_pair_jointly(names, start, single_costs, forms, laws, lambda fx: fit_cost(values, fx, fit_recs),
+                              always)
+    if fitted is None:
+        return None
+    fx, cost = fitted
     return names, fx, cost, mean_errors(values, fx, hold_recs)
 
 __all__ = [
     "CANDIDATES", "FORMS", "FRESH_SCREEN", "MIN_SHRINK", "MIN_SHRINK_SECOND", "PAIR_POOL", "SCREEN_POINTS", "SCREEN",
-    "PAIR_EVALUATIONS", "GROW_EVALUATIONS", "GROW", "FRICTION_GAIN", "FRICTION_CLEAR", "RTOL",
+    "PAIR_EVALUATIONS", "PAIR_ALWAYS", "GROW_EVALUATIONS", "GROW", "FRICTION_GAIN", "FRICTION_CLEAR", "RTOL",
     "FIT_RTOL", "errors", "mean_errors", "fit_cost", "Candidate", "fit_effects", "Attribution",
     "fit_with_load", "fit_stribeck", "fit_seal_laws", "may_start_processes", "baseline_spread",
-    "attribute", "set_name", "PAIR_JOBS", "pair_combos",
+    "attribute", "set_name", "PAIR_JOBS", "pair_combos", "simple_laws", "fit_pair_jointly",
 ]

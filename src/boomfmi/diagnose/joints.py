@@ -79,7 +79,7 @@ from ..model.boom import measurement_lag
 from ..model.catalogue import capped
 from ..physics import linkage as exc
 from .attribute import (ABS_FLOOR, CANDIDATES, FORMS, GROW, GROW_EVALUATIONS, MIN_SHRINK, MIN_SHRINK_SECOND,
-                        NOISE_FACTOR, PAIR_EVALUATIONS, PAIR_POOL, SCREEN, _halved, _map, _pays, fit_effects)
+                        NOISE_FACTOR, PAIR_POOL, SCREEN, _map, _pays, fit_effects, fit_pair_jointly, simple_laws)
 from .localise import simulate_pneumatics
 
 #: the catalogue's stages that act inside one joint's pneumatics (the pneumatic cut)
@@ -356,7 +356,7 @@ def _fit_single(job):
     cost_of = lambda effects: _mean_gap(fit_cuts, joint, ex, effects)
     forms = joint_forms(name, joint, ex)
     laws = lambda form: {q[0] for q in form}
-    simple = [f for f in forms if not any(laws(g) < laws(f) for g in forms)]
+    simple = simple_laws(forms)
     # each simple law screened and refined (not only the best screened: a leak's orifice
     # law has a narrow valley the screen's few points step over), the best kept
     fits = [(*fit_effects([name], {}, None, forms={name: f}, baseline_cost=base, cost_of=cost_of), f)
@@ -375,31 +375,18 @@ def _fit_single(job):
 
 
 def _fit_pair(job):
-    """Two effects of the pneumatic cut on one joint, fitted jointly (``attribute._fit_pair``'s
-    starts: both singles' fits; both halved; the weaker screened beside the stronger's
-    fit); None where no start lowers the fit error below the better single's by SCREEN."""
+    """Two effects of the pneumatic cut on one joint, fitted jointly
+    (``attribute.fit_pair_jointly``: both singles' fits, both halved, the weaker
+    screened beside the stronger's fit); None where no start lowers the fit error below
+    the better single's by SCREEN."""
     joint, names, ex, fit_cuts, hold_cuts, start, single_costs, others = job
     cost_of = lambda effects: _mean_gap(fit_cuts, joint, ex, effects)
     forms = {n: [q for f in joint_forms(n, joint, ex) for q in f if q[0] in start[n]] for n in names}
     forms = {n: list({q[0]: q for q in f}.values()) for n, f in forms.items()}
-    strong = min(names, key=lambda n: single_costs[n])
-    weak = next(n for n in names if n != strong)
-    enough = (1.0 - SCREEN) * min(single_costs.values())
-    starts = [(cost_of(start), start)]
-    halves = {n: {q: _halved(n, q, v) for q, v in start[n].items()} for n in names}
-    if starts[0][0] > enough and halves != start:
-        starts.append((cost_of(halves), halves))
-    if min(c for c, _ in starts) > enough:
-        held, c = fit_effects([weak], {}, None, fixed={strong: start[strong]}, forms={weak: forms[weak]},
-                                  screen_only=True, cost_of=cost_of)
-        starts.append((c, held))
-    at_start, begin = min(starts, key=lambda s: s[0])
-    if at_start > enough:
+    fitted = fit_pair_jointly(names, start, single_costs, forms, {n: [forms[n]] for n in names}, cost_of)
+    if fitted is None:
         return None
-    fx, cost = fit_effects(list(names), {}, None, start=begin, max_evaluations=PAIR_EVALUATIONS, forms=forms,
-                               cost_of=cost_of)
-    if cost > at_start:
-        fx, cost = begin, at_start
+    fx, cost = fitted
     return list(names), fx, cost, _hold_gaps(joint, ex, fx, hold_cuts, others)
 
 
