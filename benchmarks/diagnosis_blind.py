@@ -544,10 +544,14 @@ def main(argv=None) -> int:
               f"calibrated: {({True: 'yes', False: 'NO', None: 'not decided (no bin of 10 cases)'})[cal['calibrated']]}")
     command = (f"python benchmarks/diagnosis_blind.py {'--suite calibration ' if calibration else ''}"
                + (f"--only {' '.join(str(c['case']) for c in cases)}" if args.only is not None
-                  else f"--cases {len(results)}") + (" --propose" if args.propose else ""))
+                  else f"--cases {len(results)}") + (" --resume" if args.resume else "")
+               + (" --propose" if args.propose else ""))
     lines = ["# Diagnosis: " + ("calibration of the probabilities" if calibration else "blind benchmark"), "",
              f"Made by `{command}` on {platform.machine()} / "
-             f"Python {platform.python_version()} ({time.perf_counter() - t0:.0f} s wall, {args.workers} workers).", "",
+             f"Python {platform.python_version()} ({time.perf_counter() - t0:.0f} s wall, {args.workers} workers)"
+             + (": the diagnoses of an earlier run on the same recordings kept where there are any (the"
+                " blind suite's cases are the calibration suite's first 60), scored here; the times per case"
+                " are that run's." if args.resume else "."), "",
              "The recordings come from `benchmarks/hybrid_rig.py`, a simulator written apart from boomfmi's",
              "model and virtual rig (an event-located hybrid solve, its own forms of every effect). Each case:",
              "the load within +-15 % of the reference rig; nothing wrong, one effect, a pair among all",
