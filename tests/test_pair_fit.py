@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from boomfmi.diagnose.attribute import PAIR_ALWAYS, PAIR_JOBS, SCREEN, fit_pair_jointly, simple_laws
+from boomfmi.diagnose.attribute import PAIR_ALWAYS, PAIR_JOBS, SCREEN, fit_pair_jointly, law_of, simple_laws
 
 TAU = 0.006                       # the sensor's lag [s] the error is least at
 H_WALL = 10 ** 1.2379             # a heat-transfer coefficient on the wall law's screen [W/(m2.K)]
@@ -62,3 +62,11 @@ def test_simple_laws_are_those_holding_no_other_laws_parameters():
     assert simple_laws([[a], [b], [a, b]]) == [[a], [b]]
     assert simple_laws(HEAT_LAWS) == HEAT_LAWS
     assert 0 < PAIR_ALWAYS <= PAIR_JOBS
+
+
+def test_the_law_a_fit_holds_is_its_parameters_each_once_in_the_laws_order():
+    a, b = ("C", 1e-13, 5e-10, True), ("A", 1e-10, 2e-7, True)
+    laws = [[a], [b], [a, b]]
+    assert law_of(laws, {"A": 1e-9}) == [b]
+    assert law_of(laws, {"A": 1e-9, "C": 1e-12}) == [a, b]
+    assert law_of(HEAT_LAWS, {"n": 1.3}) == HEAT_LAWS[1]

@@ -726,6 +726,17 @@ def simple_laws(forms: list) -> list:
     return [f for f in forms if not any(laws(g) < laws(f) for g in forms)]
 
 
+def law_of(laws: list, params) -> list:
+    """The law of ``laws`` ([[(parameter, lower, upper, log)]]) that a fit holds the
+    parameters ``params`` (names) of: each of them once, in the laws' order."""
+    out: dict = {}
+    for law in laws:
+        for q in law:
+            if q[0] in params:
+                out.setdefault(q[0], q)
+    return list(out.values())
+
+
 def fit_pair_jointly(names, start: dict, single_costs: dict, forms: dict, weak_laws: dict, cost_of,
                      always: bool = False):
     """Two effects fitted jointly on the error ``cost_of(effects) -> float`` (the fit
@@ -776,8 +787,7 @@ def _fit_pair(args):
     """A pair fitted jointly on the fit recordings (:func:`fit_pair_jointly`) and scored
     on the holdout; None where it is not fitted."""
     names, values, fit_recs, hold_recs, start, single_costs, always = args
-    forms = {n: [(q.name, q.lower, q.upper, q.log) for q in EFFECTS[n].parameters if q.name in start[n]]
-             for n in names}
+    forms = {n: law_of(_laws(EFFECTS[n]), start[n]) for n in names}
     # the weaker screened in each of its laws for the pairs fitted always, in its own
     # single's law for the rest (their screen only decides whether to fit them)
     laws = {n: simple_laws(_laws(EFFECTS[n])) if always else [forms[n]] for n in names}
@@ -793,5 +803,5 @@ __all__ = [
     "PAIR_EVALUATIONS", "PAIR_ALWAYS", "GROW_EVALUATIONS", "GROW", "FRICTION_GAIN", "FRICTION_CLEAR", "RTOL",
     "FIT_RTOL", "errors", "mean_errors", "fit_cost", "Candidate", "fit_effects", "Attribution",
     "fit_with_load", "fit_stribeck", "fit_seal_laws", "may_start_processes", "baseline_spread",
-    "attribute", "set_name", "PAIR_JOBS", "pair_combos", "simple_laws", "fit_pair_jointly",
+    "attribute", "set_name", "PAIR_JOBS", "pair_combos", "simple_laws", "law_of", "fit_pair_jointly",
 ]

@@ -79,7 +79,8 @@ from ..model.boom import measurement_lag
 from ..model.catalogue import capped
 from ..physics import linkage as exc
 from .attribute import (ABS_FLOOR, CANDIDATES, FORMS, GROW, GROW_EVALUATIONS, MIN_SHRINK, MIN_SHRINK_SECOND,
-                        NOISE_FACTOR, PAIR_POOL, SCREEN, _map, _pays, fit_effects, fit_pair_jointly, simple_laws)
+                        NOISE_FACTOR, PAIR_POOL, SCREEN, _map, _pays, fit_effects, fit_pair_jointly, law_of,
+                        simple_laws)
 from .localise import simulate_pneumatics
 
 #: the catalogue's stages that act inside one joint's pneumatics (the pneumatic cut)
@@ -381,8 +382,7 @@ def _fit_pair(job):
     the better single's by SCREEN."""
     joint, names, ex, fit_cuts, hold_cuts, start, single_costs, others = job
     cost_of = lambda effects: _mean_gap(fit_cuts, joint, ex, effects)
-    forms = {n: [q for f in joint_forms(n, joint, ex) for q in f if q[0] in start[n]] for n in names}
-    forms = {n: list({q[0]: q for q in f}.values()) for n, f in forms.items()}
+    forms = {n: law_of(joint_forms(n, joint, ex), start[n]) for n in names}
     fitted = fit_pair_jointly(names, start, single_costs, forms, {n: [forms[n]] for n in names}, cost_of)
     if fitted is None:
         return None
