@@ -57,17 +57,26 @@ def initial_state(rec: Recording, rig: Model | None = None) -> tuple[float, floa
 #: step (the solver restarts there); smaller changes, as of a sine sweep, are followed
 #: as a ramp through the samples.
 U_STEP = 0.25
+#: The longest step [s] the solver may take where the command ramps (at least two of the
+#: recording's samples): a state at rest (a closed valve, a stuck piston) has no error
+#: for the step-size control to see, and would otherwise stride over the command's
+#: moves.  Measured against a fine solve (``benchmarks/solver_step.py``, docs/solver-step.md:
+#: five command designs, four effect sets, three seeds), the worst error is 0.07 of the
+#: recording's noise floor at the scoring tolerance (1e-5; 0.06 with 2 ms) and 0.26 at
+#: the fits' (1e-4; 0.40 with 2 ms), in a third less time than with 2 ms.
+MAX_STEP = 0.01
 
 
 def simulate_recording(values: dict, rec: Recording, effects: dict | None = None, rtol: float = 1e-9,
-                       rig: Model | None = None):
+                       rig: Model | None = None, max_step: float = MAX_STEP):
     """The model with ``values`` (and ``effects``) at the recording's rig, driven by its
     command, on its times; pressures gauge like the recording.  The command is held
     between samples, as the rig's output card holds it; where it moves by less than
     ``U_STEP`` from one sample to the next, the staircase is followed as the ramp
     through its steps' midpoints (half a sample later than the samples: the staircase's
     mean delay), so that the solver need not restart at every sample.  ``rig``: the
-    recording's :func:`rig_model`, where the caller has it already."""
+    recording's :func:`rig_model`, where the caller has it already.  ``max_step`` [s]:
+    the longest solver step where the command ramps (at least two samples)."""
     rig = rig if rig is not None else rig_model(rec)
     t = rec.data["t"].to_numpy(dtype=float)
     u = rec.data["u"].to_numpy(dtype=float)
@@ -84,7 +93,7 @@ def simulate_recording(values: dict, rec: Recording, effects: dict | None = None
     model.x0, model.p_a0, model.p_b0 = initial_state(rec, rig)
     sim = simulate_reference(model, command, float(t[-1] - t0), times=t - t0, breakpoints=changes - t0,
                              rtol=rtol, u_between=u_between,
-                             max_step=np.inf if u_between is None else 2.0 * float(np.median(np.diff(t))))
+                             max_step=np.inf if u_between is None else max(max_step, 2.0 * float(np.median(np.diff(t)))))
     sim["p_a"] -= rig.P_atm
     sim["p_b"] -= rig.P_atm
     return sim
@@ -158,5 +167,5 @@ def shrink(before: dict, after: dict) -> float:
     return 1.0 - sum(after.values()) / max(sum(before.values()), 1e-12)
 
 
-__all__ = ["CHANNELS", "PRESSURES", "rig_model", "model_for", "initial_state", "U_STEP", "simulate_recording",
+__all__ = ["CHANNELS", "PRESSURES", "rig_model", "model_for", "initial_state", "U_STEP", "MAX_STEP", "simulate_recording",
            "recorded", "RAIL_SHARE", "as_sensed", "nrmse", "shrink"]
