@@ -126,3 +126,22 @@ def test_the_start_likelihood_is_a_normal_density_whose_spread_grows_with_the_di
     expected = norm.logpdf(readings, 0.01 + moved, sigma).sum(axis=1) + 0.5 * np.log(2 * np.pi) * 30
     np.testing.assert_allclose(ll, expected, rtol=1e-10)
     assert ll[0] > ll[1] + 100.0
+
+
+def test_a_start_that_runs_away_is_impossible_with_a_quantised_sensor_too():
+    """A level whose simulated start runs away (displacements beyond any float) is
+    impossible, log-likelihood -inf, with a sensor that rounds to a quantum as without
+    one: not nan, which would make the whole start's evidence nan (and, summed over the
+    starts, leave F_s at the grid's mean); the other levels keep their values."""
+    import warnings
+    from boomfmi.identify.fit import _start_likelihood
+    moved = np.array([np.linspace(0.0, 2e-3, 30), np.full(30, np.inf), np.linspace(0.0, 4e-3, 30)])
+    q = 4e-4
+    readings = 0.01 + np.round(moved[0] / q) * q
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")          # nor a warning
+        ll = _start_likelihood(moved, readings, 0.01, q, 1e-5)
+        alone = _start_likelihood(moved[[0, 2]], readings, 0.01, q, 1e-5)
+    assert ll[1] == -np.inf
+    np.testing.assert_array_equal(ll[[0, 2]], alone)
+    assert np.all(np.isfinite(ll[[0, 2]])) and ll[0] > ll[2]

@@ -606,10 +606,15 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
             nets = [_net_force(r, j, ie, d, F_d, F_L, g, v_s, c, pressure) for g in grid]
             ll_late = like(moved_from(k, nets))
             ll_early = like(moved_from(np.clip(k - 1, 0, n - 1), nets))
-            ll = (1.0 - frac) * ll_early + frac * ll_late
+            with np.errstate(invalid="ignore"):        # 0 x -inf where a crossing sits on a sample
+                ll = (1.0 - frac) * ll_early + frac * ll_late
+            ll = np.where(frac >= 1.0, ll_late, np.where(frac <= 0.0, ll_early, ll))
         # each start's evidence as a distribution over the grid, mixed with a little of
         # the uniform one: a start that no other agrees with (a rest that was no rest,
         # a start the sensor saw late) cannot veto all the others
+        ll = np.where(np.isnan(ll), -np.inf, ll)
+        if not np.isfinite(ll).any():      # no level makes this start's motion (it ran away at each): it tells nothing
+            continue
         post = np.exp(ll - np.max(ll))
         post /= post.sum()
         if e["unsure"] > 0.0:
@@ -738,13 +743,16 @@ def _start_likelihood(moved: np.ndarray, readings: np.ndarray, reading: float, q
             return np.where(np.isnan(ll), -np.inf, ll)
     span = 1.0 if spread < q / 4.0 else 2.0
     lls = []
-    for offset in np.linspace(-0.5, 0.5, 11) * q * span:
-        mu = reading + offset + moved
-        prob = ndtr((readings + q / 2.0 - mu) / sigma) - ndtr((readings - q / 2.0 - mu) / sigma)
-        lls.append(np.sum(np.log(prob + OUTLIER), axis=1))
-    lls = np.array(lls)
-    top = lls.max(axis=0)
-    return top + np.log(np.mean(np.exp(lls - top), axis=0))
+    with np.errstate(invalid="ignore"):         # a run away: inf over inf, its rows nan
+        for offset in np.linspace(-0.5, 0.5, 11) * q * span:
+            mu = reading + offset + moved
+            prob = ndtr((readings + q / 2.0 - mu) / sigma) - ndtr((readings - q / 2.0 - mu) / sigma)
+            lls.append(np.sum(np.log(prob + OUTLIER), axis=1))
+        lls = np.array(lls)
+        lls = np.where(np.isnan(lls), -np.inf, lls)    # impossible, as without a quantum
+        top = lls.max(axis=0)
+        out = top + np.log(np.mean(np.exp(lls - top), axis=0))
+    return np.where(np.isfinite(top), out, -np.inf)
 
 
 def _quantum(x: np.ndarray) -> float:
