@@ -145,3 +145,25 @@ def test_a_start_that_runs_away_is_impossible_with_a_quantised_sensor_too():
     assert ll[1] == -np.inf
     np.testing.assert_array_equal(ll[[0, 2]], alone)
     assert np.all(np.isfinite(ll[[0, 2]])) and ll[0] > ll[2]
+
+
+def test_starts_that_no_level_makes_are_left_out_and_with_none_left_f_s_is_not_made_up(monkeypatch):
+    """Where every level of F_s makes a start impossible (-inf at each: its run ran
+    away, say), the start tells nothing and is left out; with every start left out,
+    static_friction says so (no estimate, ``starts`` 0, ``starts_impossible`` counted)
+    rather than read F_s off a flat posterior (the grid's mean)."""
+    import boomfmi.identify.fit as fit
+    from boomfmi.experiments import random_steps
+    from boomfmi.identify.preprocess import prepare
+    from boomfmi.recording import Recording
+    from boomfmi.rig.offline import run_offline
+    prof = random_steps(1, duration=6.0)
+    rec = Recording(Path("rec.csv"), run_offline({"seed": 2}, prof, prof.duration))
+    base = {k: float(getattr(fit.reference_rig, k)) for k in ("M", "K_v", "F_d", "F_L")}     # the rig's own load
+    motions = [fit.motion(prepare(rec), fit.ph.Cylinder(), fit.reference_rig.P_atm)]
+    est, _, info = fit.static_friction(motions, base, fit.ph.Cylinder(), fit.reference_rig.P_atm)
+    assert est is not None and info["starts"] >= 1 and info["starts_impossible"] == 0
+    monkeypatch.setattr(fit, "_start_likelihood", lambda moved, *a: np.full(len(moved), -np.inf))
+    est, identified, info = fit.static_friction(motions, base, fit.ph.Cylinder(), fit.reference_rig.P_atm)
+    assert est is None and not identified
+    assert info["starts"] == 0 and info["starts_impossible"] >= 1

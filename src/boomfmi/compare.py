@@ -68,7 +68,7 @@ MAX_STEP = 0.01
 
 
 def simulate_recording(values: dict, rec: Recording, effects: dict | None = None, rtol: float = 1e-9,
-                       rig: Model | None = None, max_step: float = MAX_STEP):
+                       rig: Model | None = None, max_step: float | None = None):
     """The model with ``values`` (and ``effects``) at the recording's rig, driven by its
     command, on its times; pressures gauge like the recording.  The command is held
     between samples, as the rig's output card holds it; where it moves by less than
@@ -76,7 +76,8 @@ def simulate_recording(values: dict, rec: Recording, effects: dict | None = None
     through its steps' midpoints (half a sample later than the samples: the staircase's
     mean delay), so that the solver need not restart at every sample.  ``rig``: the
     recording's :func:`rig_model`, where the caller has it already.  ``max_step`` [s]:
-    the longest solver step where the command ramps (at least two samples)."""
+    the longest solver step where the command ramps (default: ``MAX_STEP``, at least
+    two samples)."""
     rig = rig if rig is not None else rig_model(rec)
     t = rec.data["t"].to_numpy(dtype=float)
     u = rec.data["u"].to_numpy(dtype=float)
@@ -91,9 +92,10 @@ def simulate_recording(values: dict, rec: Recording, effects: dict | None = None
     u_between = _ramp(t - t0, u, jumps) if len(small) else None
     model = model_for(values, effects, rig)
     model.x0, model.p_a0, model.p_b0 = initial_state(rec, rig)
+    if max_step is None:
+        max_step = max(MAX_STEP, 2.0 * float(np.median(np.diff(t))))
     sim = simulate_reference(model, command, float(t[-1] - t0), times=t - t0, breakpoints=changes - t0,
-                             rtol=rtol, u_between=u_between,
-                             max_step=np.inf if u_between is None else max(max_step, 2.0 * float(np.median(np.diff(t)))))
+                             rtol=rtol, u_between=u_between, max_step=np.inf if u_between is None else max_step)
     sim["p_a"] -= rig.P_atm
     sim["p_b"] -= rig.P_atm
     return sim

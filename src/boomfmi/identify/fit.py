@@ -570,7 +570,7 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
         n_grid = min(n_grid, 120)
     grid = np.linspace(F_d, max(min(hi_level, GRID_TOP * F_d), 1.5 * F_d), n_grid)
     total = np.zeros(n_grid)
-    each = []
+    each, impossible = [], 0
     for e in events:
         need, n, r, j, ie, d = e["need"], e["n"], e["r"], e["j"], e["ie"], e["d"]
         dt = r.p.dt
@@ -614,6 +614,7 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
         # a start the sensor saw late) cannot veto all the others
         ll = np.where(np.isnan(ll), -np.inf, ll)
         if not np.isfinite(ll).any():      # no level makes this start's motion (it ran away at each): it tells nothing
+            impossible += 1
             continue
         post = np.exp(ll - np.max(ll))
         post /= post.sum()
@@ -622,6 +623,8 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
             post = _blurred(post, e["unsure"] / (grid[1] - grid[0]))
         total += np.log((1.0 - STRAY) * post + STRAY / n_grid)
         each.append({"t_s": round(e["t"], 4), "F_s_N": float(grid[int(np.argmax(ll))])})
+    if not each:               # every start left out: none tells F_s
+        return None, False, {"starts": 0, "starts_impossible": impossible, "lower_bound_N": lower}
     # the posterior over the grid (uniform prior above the largest force held at rest)
     total[grid < lower] = -np.inf
     if not np.isfinite(total).any():
@@ -655,8 +658,8 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
     # sensor's noise), so the posterior is flat-topped with the truth near its upper
     # edge, which its percentiles cut off; a caller may widen the interval to this range
     keep = grid[np.log(np.maximum(w, 1e-300)) >= np.log(w.max()) - 1.92]
-    return est, identified, {"starts": len(events), "each": each, "lower_bound_N": lower,
-                             "grid_N": [float(grid[0]), float(grid[-1])],
+    return est, identified, {"starts": len(each), "starts_impossible": impossible, "each": each,
+                             "lower_bound_N": lower, "grid_N": [float(grid[0]), float(grid[-1])],
                              "likelihood_range_N": [float(keep[0]), float(keep[-1])]}
 
 
