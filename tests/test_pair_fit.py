@@ -5,7 +5,8 @@ import math
 
 import pytest
 
-from boomfmi.diagnose.attribute import PAIR_ALWAYS, PAIR_JOBS, SCREEN, fit_pair_jointly, law_of, simple_laws
+from boomfmi.diagnose.attribute import (PAIR_ALWAYS, PAIR_JOBS, SCREEN, fit_pair_jointly, law_of, simple_laws,
+                                        wider_laws)
 
 TAU = 0.006                       # the sensor's lag [s] the error is least at
 H_WALL = 10 ** 1.2379             # a heat-transfer coefficient on the wall law's screen [W/(m2.K)]
@@ -62,6 +63,14 @@ def test_simple_laws_are_those_holding_no_other_laws_parameters():
     assert simple_laws([[a], [b], [a, b]]) == [[a], [b]]
     assert simple_laws(HEAT_LAWS) == HEAT_LAWS
     assert 0 < PAIR_ALWAYS <= PAIR_JOBS
+
+
+def test_wider_laws_hold_a_law_s_parameters_and_name_the_further_ones():
+    a, b, r = ("C", 1e-13, 5e-10, True), ("A", 1e-10, 2e-7, True), ("rate", 10.0, 5e3, True)
+    laws = [[a], [b], [a, b], [a, r, b]]
+    assert wider_laws(laws, [a]) == [([a, b], [b]), ([a, r, b], [r, b])]
+    assert wider_laws(laws, [a, b]) == [([a, r, b], [r])]
+    assert wider_laws(laws, [a, r, b]) == [] and wider_laws(HEAT_LAWS, HEAT_LAWS[0]) == []
 
 
 def test_the_law_a_fit_holds_is_its_parameters_each_once_in_the_laws_order():

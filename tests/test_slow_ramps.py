@@ -13,7 +13,7 @@ import pytest
 
 from boomfmi.diagnose import report as diagnosis_report
 from boomfmi.experiments import holdout_multistep, slow_ramps
-from boomfmi.identify import identify_recordings, write_outputs
+from boomfmi.identify import TimeScaleError, identify_recordings, write_outputs
 from boomfmi.recording import write_recording
 from boomfmi.rig.offline import run_offline
 
@@ -74,7 +74,7 @@ def test_slow_ramps_stretched_tenfold_are_still_refused(runs, name):
     and a lag, and a tenfold stretch fills ten times too slowly there (``deep``, the
     command continuous, was let through before: every sample followed a change of the
     command, so the old check had nothing and did not say so)."""
-    with pytest.raises(ValueError, match=rf"{name}_x10\.csv: the chambers fill and empty 0\.\d+ times as fast"
+    with pytest.raises(TimeScaleError, match=rf"{name}_x10\.csv: the chambers fill and empty 0\.\d+ times as fast"
                                          rf".*even with a 0\.75 V dead band.*no machine has such values"):
         identify_recordings([runs / f"{name}_x10.csv"])
 

@@ -290,7 +290,6 @@ def _fit_and_score(args):
         if effect.stage == "friction":
             return _fit_friction(name, fit_recs, hold_recs)
     forms = _laws(effect)
-    laws = lambda form: {q[0] for q in form}
     # every law that holds no other's parameters screened, the one that screens best
     # refined; then a law that holds its parameters and more (a leak both laminar and
     # turbulent, a cushion with its port's volume, a spool's lag with a speed limit)
@@ -307,8 +306,7 @@ def _fit_and_score(args):
                            screened=(fx, cost))
     fx_narrow, cost_narrow = fx, cost
     shows = cost <= (1.0 - GROW) * base_cost      # (an effect that barely shows cannot tell its law's shape)
-    for wider in (f for f in forms if laws(form) < laws(f)):
-        more = [q for q in wider if q[0] not in laws(form)]
+    for wider, more in wider_laws(forms, form):
         held, cost_h = fit_effects([name], values, fit_recs, fixed={**(fixed or {}), name: fx_narrow[name]},
                                    forms={name: more}, screen_only=True)
         # where the narrower law shows nothing, the wider law is grown only where its further
@@ -719,11 +717,22 @@ def _halved(effect: str, parameter: str, value: float) -> float:
     return max(0.5 * value, q.lower) if q.switch and q.on_min is None else value
 
 
+def _names(law: list) -> set:
+    """The parameters' names of a law ([(parameter, lower, upper, log)])."""
+    return {q[0] for q in law}
+
+
 def simple_laws(forms: list) -> list:
     """The laws of ``forms`` ([[(parameter, lower, upper, log)]]) that hold no other's
     parameters (a leak laminar or turbulent, not both; a lag without its speed limit)."""
-    laws = lambda form: {q[0] for q in form}
-    return [f for f in forms if not any(laws(g) < laws(f) for g in forms)]
+    return [f for f in forms if not any(_names(g) < _names(f) for g in forms)]
+
+
+def wider_laws(forms: list, law: list) -> list:
+    """The laws of ``forms`` that hold ``law``'s parameters and more, each as ``(wider
+    law, its further parameters)`` (a leak both laminar and turbulent beside the laminar
+    one; a lag with its speed limit)."""
+    return [(f, [q for q in f if q[0] not in _names(law)]) for f in forms if _names(law) < _names(f)]
 
 
 def law_of(laws: list, params) -> list:
@@ -803,5 +812,5 @@ __all__ = [
     "PAIR_EVALUATIONS", "PAIR_ALWAYS", "GROW_EVALUATIONS", "GROW", "FRICTION_GAIN", "FRICTION_CLEAR", "RTOL",
     "FIT_RTOL", "errors", "mean_errors", "fit_cost", "Candidate", "fit_effects", "Attribution",
     "fit_with_load", "fit_stribeck", "fit_seal_laws", "may_start_processes", "baseline_spread",
-    "attribute", "set_name", "PAIR_JOBS", "pair_combos", "simple_laws", "law_of", "fit_pair_jointly",
+    "attribute", "set_name", "PAIR_JOBS", "pair_combos", "simple_laws", "wider_laws", "law_of", "fit_pair_jointly",
 ]

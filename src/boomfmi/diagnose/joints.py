@@ -80,7 +80,7 @@ from ..model.catalogue import capped
 from ..physics import linkage as exc
 from .attribute import (ABS_FLOOR, CANDIDATES, FORMS, GROW, GROW_EVALUATIONS, MIN_SHRINK, MIN_SHRINK_SECOND,
                         NOISE_FACTOR, PAIR_POOL, SCREEN, _map, _pays, fit_effects, fit_pair_jointly, law_of,
-                        simple_laws)
+                        simple_laws, wider_laws)
 from .localise import simulate_pneumatics
 
 #: the catalogue's stages that act inside one joint's pneumatics (the pneumatic cut)
@@ -356,7 +356,6 @@ def _fit_single(job):
     joint, name, ex, fit_cuts, hold_cuts, base, others = job
     cost_of = lambda effects: _mean_gap(fit_cuts, joint, ex, effects)
     forms = joint_forms(name, joint, ex)
-    laws = lambda form: {q[0] for q in form}
     simple = simple_laws(forms)
     # each simple law screened and refined (not only the best screened: a leak's orifice
     # law has a narrow valley the screen's few points step over), the best kept
@@ -364,8 +363,7 @@ def _fit_single(job):
             for f in simple]
     fx, cost, form = min(fits, key=lambda s: s[1])
     if cost <= (1.0 - GROW) * base:      # (an effect that barely shows cannot tell its law's shape)
-        for wider in (f for f in forms if laws(form) < laws(f)):
-            more = [q for q in wider if q[0] not in laws(form)]
+        for wider, more in wider_laws(forms, form):
             held, _ = fit_effects([name], {}, None, fixed={name: fx[name]}, forms={name: more},
                                       screen_only=True, cost_of=cost_of)
             fx_w, cost_w = fit_effects([name], {}, None, start=held, forms={name: wider},

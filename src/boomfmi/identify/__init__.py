@@ -89,6 +89,12 @@ def _fit_per_joint(method: str, with_A_max: bool) -> None:
                          "each cylinder and the payload): --method paper and --a-max are the boom's")
 
 
+class TimeScaleError(ValueError):
+    """Recordings whose chambers fill and empty far slower or faster than the rig's
+    valve allows (:func:`_check_time_scale`): a time or pressure scale taken to be
+    wrong."""
+
+
 #: The valve's area the chambers' filling and emptying imply, over the rig's A_max,
 #: beyond which a recording's time or pressure scale is taken to be wrong.
 FLOW_SCALE = 3.0
@@ -125,7 +131,7 @@ def _check_time_scale(preps, rig, paths, result) -> None:
     bound = (max(e.ci95[1] for e in rates.at_least.values()) if slow
              else min(e.ci95[0] for e in rates.at_most.values()))
     ratio = nominal / a_ref
-    raise ValueError(f"identification from {names}: the chambers fill and empty "
+    raise TimeScaleError(f"identification from {names}: the chambers fill and empty "
                      f"{ratio:.2g} times as fast as the rig's valve allows (the pressures imply an orifice "
                      f"of {nominal:.3g} m2, the rig's A_max is {a_ref:.3g} m2; "
                      + (f"at most {bound / a_ref:.2g} times even with a {DEADBAND_WIDEST:g} V dead band"
@@ -164,4 +170,4 @@ def _check_physical(result: FitResult, paths) -> None:
 
 
 __all__ = ["identify_recordings", "identify_recs", "write_outputs", "summary_lines", "cannot_tell", "plot_fit",
-           "read_params", "write_run", "FitResult"]
+           "read_params", "write_run", "FitResult", "TimeScaleError"]
