@@ -28,6 +28,9 @@ Three stages, on every recording given together:
    is simulated from that instant (stage 2's filter), between samples where the force
    crosses F_s between them, and its displacement matched to the measured position
    (a likelihood whose spread is the sensor's and MODEL_SHARE of the displacement);
+   each start's evidence is blurred by how far the pressures' filter moves the drive
+   force where it crosses each level (against a filter twice as fast: through a
+   valve's step, whose corner it spreads, a wide band; on a smooth rise, little), and
    the posterior over F_s gives F_s and its interval.  The
    largest drive force the piston held at rest in mid-stroke is a lower bound.  Where
    the starts do not pin F_s down (the drive force jumps through the static band
@@ -150,9 +153,15 @@ def motion_modes(p: Prepared, L: float) -> Modes:
     counts as motion is set by the recording's own position resolution (two
     resolution steps per period of the smoothing filter, and at least 2 mm/s): a coarse
     sensor needs a larger speed to tell motion from rest."""
-    xs = lowpass(p.x_raw, p.fs, MODE_CUTOFF)
-    vs = np.gradient(xs, p.t)
-    q = resolution(p.x_raw)
+    return modes_of(p.x_raw, p.t, p.fs, L)
+
+
+def modes_of(x_raw: np.ndarray, t: np.ndarray, fs: float, L: float) -> Modes:
+    """:func:`motion_modes` of the position readings ``x_raw`` [m] at times ``t`` [s]
+    (sample rate ``fs`` [Hz]) of a piston of stroke ``L`` [m]."""
+    xs = lowpass(x_raw, fs, MODE_CUTOFF)
+    vs = np.gradient(xs, t)
+    q = resolution(x_raw)
     v_min = max(0.002, 2.0 * q * MODE_CUTOFF)
     sliding = np.abs(vs) > v_min
     direction = np.sign(vs) * sliding
@@ -456,6 +465,9 @@ REST_BEFORE = 0.03
 #: noise's peaks into the running maximum that a start must pass (early again).  60 Hz
 #: of 25, 60 and 100 Hz tried on benchmarks/identification.py and the excavator's.
 START_CUTOFF = 60.0
+#: Samples either side of a level's crossing over which the filter's displacement of
+#: the force (:func:`static_friction`) counts for that level.
+CROSSING_REACH = 2
 SETTLE = 0.02
 START_BACK = 0.15
 START_AFTER = 0.06
@@ -537,6 +549,13 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
         fc = min(START_CUTOFF, 0.4 * p.fs)
         level_start, raised_start = _static_level(lowpass(p.p_a_raw, p.fs, fc), lowpass(p.p_b_raw, p.fs, fc),
                                                   p.phi, cyl, P_atm, F_L, c, pressure)
+        # how far the filter moves the force at each sample: what a filter twice as fast
+        # keeps and it does not (a valve step's corner, which it spreads over a few
+        # milliseconds, and the noise between the two); small on a smooth rise
+        fc2 = min(2.0 * fc, 0.45 * p.fs)
+        level_fast, _ = _static_level(lowpass(p.p_a_raw, p.fs, fc2), lowpass(p.p_b_raw, p.fs, fc2),
+                                      p.phi, cyl, P_atm, F_L, c, pressure)
+        filtered_off = np.abs(level_start - level_fast)
         level, raised = _static_level(p.p_a, p.p_b, p.phi, cyl, P_atm, F_L, c, pressure)
         # the largest drive force held at rest in mid-stroke (away from the last
         # samples before a start): a lower bound of F_s
@@ -562,6 +581,7 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
                             if "F_unsure" in base else 0.0)
             events.append(dict(need=need, n=ie - j, r=r, j=j, ie=ie, d=d, t=float(p.t[i0]),
                                reading=float(np.median(rest)), q=q, spread=float(np.std(rest)),
+                               filtered_off=filtered_off[j:ie],
                                M=mass_at(ri, j), unsure=unsure_start))
     if not events:
         return None, False, {"starts": 0, "lower_bound_N": lower}
@@ -618,9 +638,15 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
             continue
         post = np.exp(ll - np.max(ll))
         post /= post.sum()
-        if e["unsure"] > 0.0:
-            # a start whose drive force is unsure by u tells F_s only to within u
-            post = _blurred(post, e["unsure"] / (grid[1] - grid[0]))
+        # a start whose drive force is unsure by u tells F_s only to within u; and each
+        # level only to within how far the filter moved the force where it crosses it
+        # (the largest over the samples around the crossing: through a valve's step, a
+        # wide band of levels)
+        off = e["filtered_off"]
+        around = np.max([off[np.clip(k + m, 0, n - 1)] for m in range(-CROSSING_REACH, CROSSING_REACH + 1)], axis=0)
+        width = np.hypot(e["unsure"], around)
+        if np.any(width > 0.0):
+            post = _blurred(post, width / (grid[1] - grid[0]))
         total += np.log((1.0 - STRAY) * post + STRAY / n_grid)
         each.append({"t_s": round(e["t"], 4), "F_s_N": float(grid[int(np.argmax(ll))])})
     if not each:               # every start left out: none tells F_s
@@ -707,12 +733,14 @@ def _started_between(moved: np.ndarray, k: np.ndarray, frac: np.ndarray, F_net: 
     return moved[k] + extra
 
 
-def _blurred(post: np.ndarray, width: float) -> np.ndarray:
+def _blurred(post: np.ndarray, width) -> np.ndarray:
     """A distribution over an even grid convolved with a normal distribution of standard
-    deviation ``width`` [grid steps] (mass beyond the grid's ends kept at them)."""
+    deviation ``width`` [grid steps]: one value, or one per grid point (the spread of
+    the mass at that point; mass beyond the grid's ends kept at them)."""
     n = len(post)
     k = np.arange(n)
-    kernel = np.exp(-0.5 * ((k[:, None] - k[None, :]) / max(width, 1e-9)) ** 2)
+    w = np.maximum(np.broadcast_to(np.asarray(width, float), (n,)), 1e-9)
+    kernel = np.exp(-0.5 * ((k[:, None] - k[None, :]) / w[None, :]) ** 2)
     out = kernel @ (post / kernel.sum(axis=0))
     return out / out.sum()
 
@@ -970,7 +998,7 @@ def identify(preps: list[Prepared], cyl: ph.Cylinder = ph.Cylinder(), P_atm: flo
 
 __all__ = [
     "PARAMS", "PARAMETER_UNITS", "PRESSURE_COEFFICIENT", "TELLS_WIDTH", "SYSTEMATIC", "Estimate", "FitResult",
-    "resolution", "MODE_CUTOFF", "Modes", "motion_modes", "EE_CUTOFF", "REACH", "correlation_samples",
+    "resolution", "MODE_CUTOFF", "Modes", "motion_modes", "modes_of", "EE_CUTOFF", "REACH", "correlation_samples",
     "equation_rows", "equation_error", "load_with_effect", "runs", "VE_CUTOFF", "Motion", "motion",
     "velocity_error", "REST_BEFORE", "START_CUTOFF", "SETTLE", "START_BACK", "START_AFTER", "STOP_ZONE",
     "GRID_TOP", "MODEL_SPREAD", "TEMPER", "OUTLIER", "STRAY", "IDENTIFIED_WIDTH", "EDGE_DROP",

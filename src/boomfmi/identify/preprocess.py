@@ -116,8 +116,9 @@ class JointData:
     D0: np.ndarray             #: M_x(0) x'' + bias(0) - lam J^T f_tip [N] (25 Hz signals)
     dD: np.ndarray             #: the payload's share per kg [N/kg]
     own0: np.ndarray           #: the joint's own inertia M_x[i,i](0) x''_i [N]
-    unsure: np.ndarray         #: [N] the other joints' motion's share of D0 (D0 - own0 - gravity, no payload):
-                               #: known only as well as their filtered accelerations and speeds
+    unsure: np.ndarray         #: [N] the other joints' motion's share of the net force (its coupling terms
+                               #: less gravity, no payload): known only as well as their filtered
+                               #: accelerations and speeds
     down: np.ndarray           #: its payload share per kg [N/kg]
     Mii0: np.ndarray           #: M_x[i, i] at no payload [kg]
     dMii: np.ndarray           #: per kg of payload
@@ -163,10 +164,27 @@ def prepare_machine(rec, machine=None, cutoff: float = CUTOFF) -> list:
     return _prepare_linkage(rec, ex, cutoff)
 
 
+#: How long [s] before and after it slides a joint still counts as moving for the other
+#: joints' net force (:func:`_prepare_linkage`): its motion filtered at the preparation's
+#: cut-off spreads a start's or a stop's acceleration over about a period of it
+#: (40 ms at 25 Hz), and the classification sees a start only once the speed passes the
+#: threshold that tells it from rest.
+STILL_MARGIN = 0.03
+
+
 def _prepare_linkage(rec, ex: exc.Excavator, cutoff: float) -> list[JointData]:
     """:func:`prepare_machine` on the linkage: one :class:`JointData` per joint of
-    ``physics.linkage.JOINTS``."""
-    from .fit import motion_modes          # fit builds on this module
+    ``physics.linkage.JOINTS``.
+
+    A joint's net force (its ``p_a``, everything on it but its own inertia and
+    friction) holds the other joints' inertia and velocity terms from their motion
+    filtered at ``cutoff``.  Where such a joint rests (``fit.modes_of``, more than
+    :data:`STILL_MARGIN` from its sliding) its acceleration is zero, not the twice
+    differentiated noise of a quantised angle: that noise, 0.6 to 1.5 N on the
+    bucket's, the boom's and the arm's net force with the excavator rig's 12-bit
+    angles, is the size of a start's evidence of F_s (its running maximum reached each
+    level early)."""
+    from .fit import _dilate, modes_of          # fit builds on this module
     JOINTS = exc.JOINTS
     d = _frame(rec)
     P_atm = float(rec.P_atm) if hasattr(rec, "P_atm") else ex.P_atm
@@ -186,6 +204,10 @@ def _prepare_linkage(rec, ex: exc.Excavator, cutoff: float) -> list[JointData]:
         if not np.any(f_tip):
             f_tip = None
     n = len(t)
+    modes = [modes_of(x_raw[:, i], t, fs, act.stroke) for i, act in enumerate(ex.actuators)]
+    moving = np.column_stack([_dilate(m.sliding, int(round(STILL_MARGIN * fs))) for m in modes])
+    a_moving = np.where(moving, a, 0.0)
+    coupling = np.empty((n, 4))
     xc = np.clip(x, 0.0, ex.strokes)
     D = np.empty((2, n, 4))
     own = np.empty((2, n, 4))
@@ -198,23 +220,28 @@ def _prepare_linkage(rec, ex: exc.Excavator, cutoff: float) -> list[JointData]:
             D[m, k] = Mx @ a[k] + bias
             own[m, k] = np.diag(Mx) * a[k]
             Mii[m, k] = np.diag(Mx)
-        unsure[k] = np.abs(D[0, k] - own[0, k] - exc.piston_dynamics(xc[k], zero, 0.0, ex)[1])
+            if m == 0:
+                # the other joints' inertia from where they move only (the velocity terms
+                # as they are: a resting joint's speed noise enters them squared)
+                coupling[k] = Mx @ a_moving[k] - np.diag(Mx) * a_moving[k] + bias
+        unsure[k] = np.abs(coupling[k] - exc.piston_dynamics(xc[k], zero, 0.0, ex)[1])
         if f_tip is not None:
             q = exc.joint_angles(xc[k], ex)
             tau = exc.tip_torques(q, f_tip[k], ex) / exc.lever_arms(xc[k], ex)
             D[0, k] -= tau
             D[1, k] -= tau
+            coupling[k] -= tau
     scale = exc.friction_scale(xc, ex)
     phi_boom = ph.phi_from_x(xc[:, 1], ex.geometry)
     out = []
     for i, (j, act) in enumerate(zip(JOINTS, ex.actuators)):
-        F_net = F_p[:, i] - (D[0, :, i] - own[0, :, i])     # everything on it but its own inertia and friction
+        F_net = F_p[:, i] - coupling[:, i]     # everything on it but its own inertia and friction
         phi = phi_boom if j == "boom" else np.zeros(n)
         p = Prepared(t=t, u=d[f"u_{j}"].to_numpy(float), p_a=lowpass(F_net, fs, cutoff) + P_atm,
                      p_b=np.full(n, P_atm), x=x[:, i], v=v[:, i], a=a[:, i], phi=phi, x_raw=x_raw[:, i],
                      p_a_raw=F_net + P_atm, p_b_raw=np.full(n, P_atm), fs=fs, cutoff=cutoff,
                      source=f"{getattr(rec, 'path', '')}:{j}")
-        out.append(JointData(p=p, modes=motion_modes(p, act.stroke), F_p=F_p[:, i], scale=scale[:, i],
+        out.append(JointData(p=p, modes=modes[i], F_p=F_p[:, i], scale=scale[:, i],
                              D0=D[0, :, i], dD=D[1, :, i] - D[0, :, i], own0=own[0, :, i],
                              unsure=unsure[:, i],
                              down=own[1, :, i] - own[0, :, i], Mii0=Mii[0, :, i], dMii=Mii[1, :, i] - Mii[0, :, i],
