@@ -50,7 +50,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.ndimage import median_filter
+from scipy.ndimage import maximum_filter1d, median_filter
 from scipy.optimize import least_squares
 from scipy.special import ndtr
 
@@ -546,16 +546,14 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
         # run's direction, from the pressures filtered at START_CUTOFF: unfiltered, the
         # running maximum below would pick the noise's peaks; at the other stages' 25 Hz,
         # the filter smears the valve step's corner back before the start)
+        filtered_at = lambda f: _static_level(lowpass(p.p_a_raw, p.fs, f), lowpass(p.p_b_raw, p.fs, f),
+                                              p.phi, cyl, P_atm, F_L, c, pressure)
         fc = min(START_CUTOFF, 0.4 * p.fs)
-        level_start, raised_start = _static_level(lowpass(p.p_a_raw, p.fs, fc), lowpass(p.p_b_raw, p.fs, fc),
-                                                  p.phi, cyl, P_atm, F_L, c, pressure)
+        level_start, raised_start = filtered_at(fc)
         # how far the filter moves the force at each sample: what a filter twice as fast
         # keeps and it does not (a valve step's corner, which it spreads over a few
         # milliseconds, and the noise between the two); small on a smooth rise
-        fc2 = min(2.0 * fc, 0.45 * p.fs)
-        level_fast, _ = _static_level(lowpass(p.p_a_raw, p.fs, fc2), lowpass(p.p_b_raw, p.fs, fc2),
-                                      p.phi, cyl, P_atm, F_L, c, pressure)
-        filtered_off = np.abs(level_start - level_fast)
+        filtered_off = np.abs(level_start - filtered_at(min(2.0 * fc, 0.45 * p.fs))[0])
         level, raised = _static_level(p.p_a, p.p_b, p.phi, cyl, P_atm, F_L, c, pressure)
         # the largest drive force held at rest in mid-stroke (away from the last
         # samples before a start): a lower bound of F_s
@@ -642,8 +640,7 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
         # level only to within how far the filter moved the force where it crosses it
         # (the largest over the samples around the crossing: through a valve's step, a
         # wide band of levels)
-        off = e["filtered_off"]
-        around = np.max([off[np.clip(k + m, 0, n - 1)] for m in range(-CROSSING_REACH, CROSSING_REACH + 1)], axis=0)
+        around = maximum_filter1d(e["filtered_off"], 2 * CROSSING_REACH + 1, mode="nearest")[k]
         width = np.hypot(e["unsure"], around)
         if np.any(width > 0.0):
             post = _blurred(post, width / (grid[1] - grid[0]))
