@@ -98,6 +98,7 @@ from ..identify.fit import PRESSURE_COEFFICIENT, identify, load_with_effect, mot
 from ..identify.preprocess import ABS_FLOOR, NOISE_FACTOR, noise_floor, prepare
 from ..model import EFFECTS, Boom, measure
 from ..model.boom import measurement_lag
+from ..model.reference import SolverError
 from ..model.catalogue import STAGES, fit_hook
 from .evidence import NONE, UNEXPLAINED, Hypothesis, probabilities, residual_counts
 
@@ -152,10 +153,15 @@ def errors(values: dict, effects: dict, rec, rtol: float = RTOL) -> dict:
 
     The measurement stage's effects (the sensor lag) act on the measured channels only,
     after the physics: with them alone, the model runs once (cached) and only the
-    measurement path varies."""
+    measurement path varies.  A model the reference solver cannot integrate (a
+    candidate's load re-identified with a mass of nanograms, whose steps collapse) has
+    an infinite error on every channel: it explains nothing."""
     only_measured = bool(effects) and all(EFFECTS[n].stage == "measurement" for n in effects)
-    sim = (_baseline(values, rec, rtol) if only_measured
-           else simulate_recording(values, rec, effects=effects, rtol=rtol))
+    try:
+        sim = (_baseline(values, rec, rtol) if only_measured
+               else simulate_recording(values, rec, effects=effects, rtol=rtol))
+    except SolverError:         # a candidate's model the solver cannot integrate explains nothing
+        return {c: math.inf for c in CHANNELS}
     if only_measured:
         t = sim["time"].to_numpy()
         tau, delay = measurement_lag(effects)

@@ -185,6 +185,11 @@ class StickSlip:
         return new
 
 
+class SolverError(RuntimeError):
+    """The reference solver could not integrate the model (a parameter set that makes
+    it too stiff for its steps: a moving mass of micrograms, say)."""
+
+
 class Resampler:
     """The segments' dense solutions put on the output ``times`` [s]."""
 
@@ -254,11 +259,16 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
                 fun = lambda _, y, s=s: rhs(boom, layout, u, f_ext, s, y)
             else:
                 fun = lambda tau, y, s=s: rhs(boom, layout, u_between(tau), f_ext, s, y)
-            sol = solve_ivp(fun, (t, cut), y,
-                            method=method, rtol=rtol, atol=layout.atol, events=events or None, max_step=max_step,
-                            dense_output=True)
+            try:
+                sol = solve_ivp(fun, (t, cut), y,
+                                method=method, rtol=rtol, atol=layout.atol, events=events or None, max_step=max_step,
+                                dense_output=True)
+            except ValueError as err:       # steps of zero length (scipy's dense output refuses them)
+                raise SolverError(f"reference solver failed at t = {t:g} s: its steps collapsed ({err}); "
+                                  f"the load's mechanical time constant M/K_v is "
+                                  f"{model.load.M / model.load.K_v:.3g} s") from err
             if sol.status < 0:
-                raise RuntimeError(f"reference solver failed at t = {t:g} s: {sol.message}")
+                raise SolverError(f"reference solver failed at t = {t:g} s: {sol.message}")
             t_new = float(sol.t[-1])
             y = sol.y[:, -1].copy()
             if sol.status == 1:          # an event ended the segment
@@ -390,5 +400,5 @@ def simulate(machine: Machine, command: Callable[[float], dict], stop_time: floa
     return simulate_linkage(command, stop_time, machine, **options)
 
 
-__all__ = ["Layout", "rhs", "StickSlip", "Resampler", "simulate_reference", "simulate_linkage",
+__all__ = ["Layout", "rhs", "StickSlip", "Resampler", "SolverError", "simulate_reference", "simulate_linkage",
            "simulate_excavator_reference", "simulate"]
