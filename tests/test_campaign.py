@@ -1,14 +1,13 @@
 """boomfmi campaign: the manifest's checks, trends and flags, the Dask engine (resume,
-failures, a worker killed mid-run on a real scheduler), and the virtual fleet."""
+failures; a worker killed mid-case on a real scheduler is tests/test_campaign_lost_worker.py),
+and the virtual fleet."""
 from __future__ import annotations
 
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -18,7 +17,6 @@ from boomfmi.campaign.fleet import plan_fleet, score_fleet
 from boomfmi.campaign.trend import machine_trends, parameter_move
 
 ROOT = Path(__file__).resolve().parents[1]
-BIN = Path(sys.executable).parent
 
 
 def cli(*args, cwd, timeout=900, env=None):
@@ -267,77 +265,6 @@ def test_the_local_clusters_workers_run_without_the_profiler_and_the_trim_thresh
         assert set(engine.client.run(_worker_settings).values()) == {(False, None)}
     with pytest.raises(ValueError, match="--workers sizes the local cluster"):
         Engine(scheduler="tcp://127.0.0.1:1", workers=2)
-
-
-def _wait_for(predicate, timeout, what):
-    t = time.monotonic()
-    while time.monotonic() - t < timeout:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.2)
-    raise AssertionError(f"timed out waiting for {what}")
-
-
-@pytest.mark.slow
-def test_a_campaign_on_a_scheduler_survives_a_worker_killed_mid_case(tmp_path, recordings):
-    """`dask scheduler` and two `dask worker` processes (no nanny: a killed worker stays
-    dead) over loopback; one worker is killed while it runs a case: the campaign
-    completes on the other, every case once."""
-    from distributed import Client
-    machines, dates = ["m1", "m2", "m3"], ["2025-01-06", "2025-01-13"]
-    manifest = _campaign(tmp_path, recordings, machines, dates)
-    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
-               DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED="False")      # (LOCAL_WORKER_CONFIG)
-    procs = []
-    try:
-        sched_file = tmp_path / "scheduler.json"
-        procs.append(subprocess.Popen([BIN / "dask", "scheduler", "--host", "127.0.0.1", "--port", "0",
-                                       "--no-dashboard", "--scheduler-file", sched_file],
-                                      cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        address = _wait_for(lambda: sched_file.is_file() and json.loads(sched_file.read_text() or "{}").get("address"),
-                            60, "the scheduler")
-        workers = {}
-        for name in ("w1", "w2"):
-            workers[name] = subprocess.Popen([BIN / "dask", "worker", address, "--nthreads", "1", "--no-nanny",
-                                              "--name", name, "--no-dashboard", "--host", "127.0.0.1"],
-                                             cwd=tmp_path, env=env, stdout=subprocess.DEVNULL,
-                                             stderr=subprocess.DEVNULL)
-            procs.append(workers[name])
-        with Client(address, timeout="20s") as watch:
-            watch.wait_for_workers(2, timeout=60)
-            victim = next(a for a, w in watch.scheduler_info()["workers"].items() if w["name"] == "w2")
-            campaign = subprocess.Popen([sys.executable, "-m", "boomfmi.cli", "campaign", manifest, "--out",
-                                         tmp_path / "out", "--scheduler", address, "--ssp", tmp_path / "no.ssp"],
-                                        cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                        text=True)
-            procs.append(campaign)
-            # w2 is running a case (one started on it some time ago): kill it there
-            keys = _wait_for(lambda: watch.processing(workers=[victim]).get(victim), 120, "a case on w2")
-            time.sleep(2.0)
-            keys = list(watch.processing(workers=[victim]).get(victim) or keys)
-            workers["w2"].send_signal(signal.SIGKILL)
-            workers["w2"].wait(10)
-            stdout, stderr = campaign.communicate(timeout=600)
-        assert campaign.returncode == 0, stderr
-        doc = json.loads((tmp_path / "out" / "campaign.json").read_text())
-        assert doc["run"]["cases"] == 6 and doc["run"]["failed"] == 0
-        seen = [(c["machine"], c["date"]) for c in doc["cases"]]
-        assert sorted(seen) == sorted((m, d) for m in machines for d in dates)       # none lost, none twice
-        folders = sorted(p.parent for p in (tmp_path / "out" / "cases").rglob("case.json"))
-        assert len(folders) == 6
-        survivor = next(a for a in [c["worker"] for c in doc["cases"]] if a != victim)
-        lost = [c for c in doc["cases"] if any(f"-{c['machine']}-{c['date']}-" in str(k) for k in keys)]
-        assert lost and all(c["worker"] == survivor for c in lost)       # the killed worker's case ran again
-        assert "6/6 cases" in stderr
-    finally:
-        for p in reversed(procs):
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-                try:
-                    p.wait(20)
-                except subprocess.TimeoutExpired:
-                    p.kill()
 
 
 # --- the virtual fleet -------------------------------------------------------------------
