@@ -564,7 +564,8 @@ def identify_load(fit_cuts, effects: dict | None = None, payload: float | None =
                              f"value: too little motion of the {joint} in them")
     motions = [_motion(cut, payload, c, law) for cut in cuts]
     base = {"M": [cut.data.Mii0 + payload * cut.data.dMii for cut in cuts], "K_v": values["K_v"],
-            "F_d": values["F_d"], "F_L": 0.0, "F_unsure": [cut.data.unsure for cut in cuts]}
+            "F_d": values["F_d"], "F_L": 0.0, "F_unsure": [cut.data.unsure for cut in cuts],
+            "F_error": [cut.data.coupling_error for cut in cuts]}
     F_s, _, info = static_friction(motions, base, _unit(cuts[0]), cuts[0].ex.P_atm, v_s=v_s)
     interval = None
     if F_s is not None:

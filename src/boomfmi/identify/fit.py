@@ -532,11 +532,16 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
     none.  ``base["M"]`` is the moving mass [kg], or one array per motion of the mass at
     each sample (a linkage's joint, whose mass moves with its posture: each start then
     runs with the mass where it starts).  ``base["F_unsure"]`` (optional, one array per
-    motion) [N]: how far the net force at each sample is unsure (a linkage's terms from
-    every joint's filtered motion); a rest's force counts towards the lower bound only
-    beyond it, and a start's evidence is blurred by its root mean square over the start.
+    motion) [N]: how far the net force at each sample may be off at most (a linkage's
+    terms from every joint's filtered motion: their whole size); a rest's force counts
+    towards the lower bound only beyond it (the bound cuts off every level below it, so
+    it must hold whatever the terms' error).  ``base["F_error"]`` (optional, likewise;
+    default ``F_unsure``) [N]: the scale of that error; a start's evidence is blurred by
+    its root mean square over the start (a likelihood's width: blurred by the terms'
+    whole size, the excavator arm's F_s came out 1.25 % low on average).
     Returns ``(Estimate or None, identified, details)``."""
     M, K_v, F_d, F_L = (base[k] for k in ("M", "K_v", "F_d", "F_L"))
+    error = base.get("F_error", base.get("F_unsure"))
     mass_at = (lambda ri, j: float(M[ri][j])) if isinstance(M, (list, tuple)) else (lambda ri, j: float(M))
     c = base.get(PRESSURE_COEFFICIENT[pressure], 0.0) if pressure is not None else 0.0
     events, lower = [], 0.0
@@ -575,8 +580,8 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
             # a start's drive force is unsure by the linkage's terms over its window: their
             # root mean square (the largest overstates it two to three times: the terms
             # peak where the other joints accelerate hardest, not all through a start)
-            unsure_start = (float(np.sqrt(np.mean((base["F_unsure"][ri] / np.cos(p.phi))[j:ie + 1] ** 2)))
-                            if "F_unsure" in base else 0.0)
+            unsure_start = (float(np.sqrt(np.mean((error[ri] / np.cos(p.phi))[j:ie + 1] ** 2)))
+                            if error is not None else 0.0)
             events.append(dict(need=need, n=ie - j, r=r, j=j, ie=ie, d=d, t=float(p.t[i0]),
                                reading=float(np.median(rest)), q=q, spread=float(np.std(rest)),
                                filtered_off=filtered_off[j:ie],

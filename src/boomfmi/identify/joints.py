@@ -203,10 +203,10 @@ def identify_joints(recordings, ex: exc.Excavator = exc.Excavator(), cutoff: flo
         # the joint's own mass where each start happens (it moves with the posture)
         M = [r[i].Mii0 + payload * r[i].dMii for r in data]
         # the other joints' motion's share of the net force is known only as well as
-        # their filtered motion: a rest's force bounds F_s only beyond it, and a start
-        # tells F_s only to within it
+        # their filtered motion: a rest's force bounds F_s only beyond its whole size,
+        # and a start tells F_s only to within its error's scale
         base = {"M": M, "K_v": est[f"K_v_{j}"].value, "F_d": est[f"F_d_{j}"].value, "F_L": 0.0,
-                "F_unsure": [r[i].unsure for r in data]}
+                "F_unsure": [r[i].unsure for r in data], "F_error": [r[i].coupling_error for r in data]}
         F_s, identified, info3 = static_friction(motions, base, cyl, P_atm)
         if F_s is not None:
             F_s, identified = honest_static(F_s, info3)
