@@ -577,8 +577,8 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
             need = d * level_start[j:ie] - (raised_start[j:ie] if c else 0.0)
             rest = p.x_raw[j:max(j + 1, i0 - int(0.01 * p.fs))]
             q = _quantum(p.x_raw[j:min(len(p.x_raw), ie + int(0.05 * p.fs))])
-            # a start's drive force is unsure by the linkage's terms over its window: their
-            # root mean square (the largest overstates it two to three times: the terms
+            # a start's drive force is unsure by the linkage's terms' error over its window:
+            # its root mean square (the largest overstates it two to three times: the terms
             # peak where the other joints accelerate hardest, not all through a start)
             unsure_start = (float(np.sqrt(np.mean((error[ri] / np.cos(p.phi))[j:ie + 1] ** 2)))
                             if error is not None else 0.0)
