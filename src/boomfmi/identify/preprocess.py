@@ -174,6 +174,13 @@ def prepare_machine(rec, machine=None, cutoff: float = CUTOFF) -> list:
 STILL_MARGIN = 0.03
 
 
+def _others(Mx: np.ndarray, acc: np.ndarray, bias: np.ndarray) -> np.ndarray:
+    """Each piston's share [N] of the other joints' inertia (``Mx`` [kg] times the
+    accelerations ``acc`` [m/s^2], less its own) and of ``bias`` (velocity and gravity
+    terms, ``physics.linkage.piston_dynamics``)."""
+    return Mx @ acc - np.diag(Mx) * acc + bias
+
+
 def _prepare_linkage(rec, ex: exc.Excavator, cutoff: float) -> list[JointData]:
     """:func:`prepare_machine` on the linkage: one :class:`JointData` per joint of
     ``physics.linkage.JOINTS``.
@@ -239,10 +246,12 @@ def _prepare_linkage(rec, ex: exc.Excavator, cutoff: float) -> list[JointData]:
             if m == 0:
                 # the other joints' inertia from where they move only (the velocity terms
                 # as they are: a resting joint's speed noise enters them squared)
-                coupling[k] = Mx @ a_moving[k] - np.diag(Mx) * a_moving[k] + bias
+                Mx0 = Mx
+                coupling[k] = _others(Mx, a_moving[k], bias)
         unsure[k] = np.abs(coupling[k] - exc.piston_dynamics(xc[k], zero, 0.0, ex)[1])
-        Mx2, bias2, _ = exc.piston_dynamics(xc[k], v2[k], 0.0, ex)
-        coupling_error[k] = np.abs(coupling[k] - (Mx2 @ a2_moving[k] - np.diag(Mx2) * a2_moving[k] + bias2))
+        # M_x depends on the posture only: the faster filter's terms need its bias alone
+        coupling_error[k] = np.abs(coupling[k] - _others(Mx0, a2_moving[k],
+                                                         exc.piston_dynamics(xc[k], v2[k], 0.0, ex)[1]))
         if f_tip is not None:
             q = exc.joint_angles(xc[k], ex)
             tau = exc.tip_torques(q, f_tip[k], ex) / exc.lever_arms(xc[k], ex)
