@@ -790,12 +790,35 @@ def _start_likelihood(moved: np.ndarray, readings: np.ndarray, reading: float, q
 
 def _quantum(x: np.ndarray) -> float:
     """The step [m] between the position readings around a start (0 where they are not
-    quantised finer than noise shows): the smallest gap between distinct readings, if
-    the readings take few distinct values."""
+    quantised): the smallest gap between distinct readings, where the readings lie on
+    its lattice (every gap between neighbouring distinct readings within
+    ``LATTICE_SLACK`` per step of a whole number of steps, at most ``LATTICE_STEPS``:
+    the sensor's rounding, levels a fast run skips included), however many levels the
+    motion passes through.  A count of
+    distinct readings cannot tell: a fast start passes a level a sample, and a window
+    on a 12-bit angle then held more levels than a third of its samples, so the
+    rounding went unseen, each start's likelihood took the reading for exact, and the
+    starts put F_s up to three times too high."""
     levels = np.unique(x)
-    if len(levels) < 2 or len(levels) > len(x) // 3:
+    if len(levels) < 2:
         return 0.0
-    return float(np.min(np.diff(levels)))
+    gaps = np.diff(levels)
+    q = float(gaps.min())
+    steps = gaps / q
+    whole = np.round(steps)
+    if np.any(whole > LATTICE_STEPS) or np.any(np.abs(steps - whole) > LATTICE_SLACK * whole):
+        return 0.0
+    return q
+
+
+#: how far [steps] a gap between neighbouring readings may be from a whole number of
+#: the quantum, per step (an angle's quantum maps to a position's through the linkage,
+#: which stretches it by about 1 % over a start's few millimetres)
+LATTICE_SLACK = 0.05
+#: the most steps between neighbouring readings on the lattice (a run that skips levels:
+#: 10 quanta a sample is 2 m/s for a 12-bit angle on the boom; readings that are not
+#: rounded have gaps hundreds of times their smallest)
+LATTICE_STEPS = 10
 
 
 def breakaways(p: Prepared, L: float, rest: float = 0.05, lead: float = 0.08, q: float = 4e-4):
