@@ -53,6 +53,19 @@ def fmu_dir() -> Path:
 
 
 @pytest.fixture(scope="session")
+def hybrid():
+    """benchmarks/hybrid_rig.py, the simulator written apart from boomfmi's model, as a
+    module (loaded once per process, as ``hybrid_rig``)."""
+    import importlib.util
+    if "hybrid_rig" not in sys.modules:
+        spec = importlib.util.spec_from_file_location("hybrid_rig", ROOT / "benchmarks" / "hybrid_rig.py")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules["hybrid_rig"] = module
+        spec.loader.exec_module(module)
+    return sys.modules["hybrid_rig"]
+
+
+@pytest.fixture(scope="session")
 def fmu(fmu_dir):
     """Path of a built FMU by name: ``fmu("valve")``."""
     def path(name: str) -> Path:

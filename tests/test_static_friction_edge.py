@@ -7,16 +7,12 @@ the grid's floor (F_d) up to an edge near the truth.  Its mean sat mid-flat, low
 the flat's width (the boom on hybrid_rig.py, 12-bit angle sensor: -7 % over ten noise
 draws); where the starts do not identify F_s its value is now that edge.
 """
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from boomfmi.identify.fit import EDGE_DROP, TEMPER, upper_edge
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def _flat_topped(truth: float, floor: float, fall: float, rng):
@@ -28,15 +24,10 @@ def _flat_topped(truth: float, floor: float, fall: float, rng):
     return grid, ll + 0.01 * rng.standard_normal(len(grid)) / TEMPER
 
 
-def _hybrid_random_steps_identified(seed: int):
-    """The boom's reference load on benchmarks/hybrid_rig.py (its default sensors: a
-    12-bit angle over 300 deg), random steps (10 s), the sensors' noise drawn from
-    ``seed``, identified: ``(the true load, identify's FitResult)``."""
-    spec = importlib.util.spec_from_file_location("hybrid_rig", ROOT / "benchmarks" / "hybrid_rig.py")
-    hr = sys.modules.get("hybrid_rig") or importlib.util.module_from_spec(spec)
-    if "hybrid_rig" not in sys.modules:
-        sys.modules["hybrid_rig"] = hr
-        spec.loader.exec_module(hr)
+def _hybrid_random_steps_identified(hr, seed: int):
+    """The boom's reference load on benchmarks/hybrid_rig.py (``hr``; its default
+    sensors: a 12-bit angle over 300 deg), random steps (10 s), the sensors' noise drawn
+    from ``seed``, identified: ``(the true load, identify's FitResult)``."""
     from boomfmi.experiments import random_steps
     from boomfmi.identify.fit import identify
     from boomfmi.identify.preprocess import prepare
@@ -71,12 +62,12 @@ def test_no_edge_on_the_grid_is_said_not_invented():
     assert 120.0 < upper_edge(grid, ll) < 125.0
 
 
-def test_a_start_seen_through_a_coarse_angle_sensor_reads_F_s_at_the_edge_and_still_flags_it():
+def test_a_start_seen_through_a_coarse_angle_sensor_reads_F_s_at_the_edge_and_still_flags_it(hybrid):
     """The boom's reference load on hybrid_rig.py, a 12-bit / 300 deg angle sensor,
     random steps (benchmarks/identification.py part 3, noise seed 0): F_s came out
     7.7 % low (the flat's mean); now within 1 %, still flagged (the starts cannot tell it
     within 10 %), its interval holding the truth and the other parameters untouched."""
-    load, res = _hybrid_random_steps_identified(seed=0)
+    load, res = _hybrid_random_steps_identified(hybrid, seed=0)
     F_s = res.params["F_s"]
     assert not res.details["static_friction"]["identified"]
     assert any("F_s" in w for w in res.warnings), res.warnings
@@ -203,7 +194,7 @@ def test_a_blur_of_one_width_per_level_spreads_each_levels_mass_by_its_own():
     assert np.allclose(_blurred(two, 4.0), _blurred(two, np.full(n, 4.0)))
 
 
-def test_a_start_through_a_valve_step_tells_F_s_only_within_what_the_filter_moves_the_force():
+def test_a_start_through_a_valve_step_tells_F_s_only_within_what_the_filter_moves_the_force(hybrid):
     """The boom's reference load on hybrid_rig.py, 12-bit angle sensor, random steps,
     noise seed 2 (benchmarks/identification.py part 3): its starts come as the valve
     steps, the drive force sweeping through the static band within a few milliseconds.
@@ -212,7 +203,7 @@ def test_a_start_through_a_valve_step_tells_F_s_only_within_what_the_filter_move
     twice as fast).  Each start's evidence was as sharp as the position alone made it,
     and F_s came out 9.9 % low; blurred by that band, within 3 %, its interval holding
     the truth."""
-    load, res = _hybrid_random_steps_identified(seed=2)
+    load, res = _hybrid_random_steps_identified(hybrid, seed=2)
     F_s = res.params["F_s"]
     assert F_s.value == pytest.approx(load["F_s"], rel=0.03)
     assert F_s.ci95[0] <= load["F_s"] <= F_s.ci95[1]
@@ -237,7 +228,7 @@ def test_the_quantum_is_found_on_a_fast_start_that_passes_a_level_a_sample():
     assert _quantum(np.full(30, 0.0376)) == 0.0
 
 
-def test_a_fast_start_off_a_stop_through_a_coarse_angle_does_not_read_a_late_start():
+def test_a_fast_start_off_a_stop_through_a_coarse_angle_does_not_read_a_late_start(hybrid):
     """benchmarks/diagnosis_blind.py's calibration case 68 (the load as drawn, a rounded
     valve deadband, a 12-bit angle sensor, random steps): the piston rests on its stop
     and the valve steps open, so the drive force sweeps through the static level in a
@@ -247,11 +238,7 @@ def test_a_fast_start_off_a_stop_through_a_coarse_angle_does_not_read_a_late_sta
     interval 305 to 349 N), against 102 N; the deadband's fit then had to make up the
     late starts, and the diagnosis said "unexplained".  Now such a start tells F_s
     little: it is flagged, its interval holding the truth."""
-    spec = importlib.util.spec_from_file_location("hybrid_rig", ROOT / "benchmarks" / "hybrid_rig.py")
-    hr = sys.modules.get("hybrid_rig") or importlib.util.module_from_spec(spec)
-    if "hybrid_rig" not in sys.modules:
-        sys.modules["hybrid_rig"] = hr
-        spec.loader.exec_module(hr)
+    hr = hybrid
     from boomfmi.experiments import random_steps
     from boomfmi.identify.fit import identify
     from boomfmi.identify.preprocess import prepare

@@ -143,7 +143,6 @@ GROW_EVALUATIONS = 30       #: and of a law grown by further parameters from a n
 GROW = 0.1                  #: the share of the fit error the narrower law must remove to be grown
 FRESH_SCREEN = 9            #: the most runs a wider law's own screen may take (two parameters' grid)
 FRICTION_GAIN = 0.03   #: the share by which a seal-pressure law must lower the load's velocity misfit
-FRICTION_CLEAR = 0.25  #: and how far its coefficient's interval keeps from zero (its lower end / value)
 RTOL = 1e-5            #: the reference solver's tolerance when scoring
 FIT_RTOL = 1e-4        #: and while fitting (each fit runs the model a dozen times or more)
 
@@ -463,7 +462,7 @@ def fit_seal_laws(effect, fit_recs, hold_recs):
     return effect.name, fx, cost, mean_errors(joint, fx, hold_recs), joint
 
 
-def _friction_told(fit_recs, hold_recs, before: dict):
+def _friction_told(fit_recs, hold_recs, before: dict, beyond_noise: float = 0.0):
     """A seal-pressure effect (``load_law`` "seal_pressure": pressure_friction) where the
     outputs cannot show it: the baseline's F_d takes the
     seals' friction at the recordings' mean pressure, and what is left may sit within
@@ -473,13 +472,22 @@ def _friction_told(fit_recs, hold_recs, before: dict):
     * the velocity fit of the load with the coefficient (``identify.fit``, the best of
       the seal-pressure laws) misses the recorded velocities by ``FRICTION_GAIN`` less
       than without it (over every sliding run: neither noise nor an effect on the
-      pneumatics, which the load's fit reads through the recorded pressures, moves it);
-    * the coefficient's 95 % interval keeps clear of zero (its lower end at least
-      ``FRICTION_CLEAR`` of the value); and
+      pneumatics, which the load's fit reads through the recorded pressures, moves it;
+      on the 120 cases of ``diagnosis_blind.py --suite calibration`` each case without a
+      seal-pressure friction stays within 0.8 % of its plain misfit, each with one
+      lowers it 3 % or more, or not at all where the seals' law saturates: a constant
+      factor on the friction, which F_d takes whole); and
     * the model with it does not predict the holdout worse than the baseline (shrink
-      > 0), which was never fitted on.
+      > 0), which was never fitted on, or leaves it within the noise (its summed NRMSE
+      within ``beyond_noise``): a holdout whose gap lies within its noise cannot refute
+      what keeps it there, and a shrink of a gap within the noise is the noise's sign.
 
-    None otherwise (the verdict stays as it was)."""
+    The coefficient's interval is not asked to keep clear of a share of its value: its
+    bootstrap runs over the sliding runs on a log scale, which never reaches zero, so
+    that share only asked for a precision that five runs do not give (calibration case
+    101, a seal friction 1.7 times the Coulomb level at 6 bar: velocity misfit 14 %
+    lower, interval from 0.1 of the value).  None otherwise (the verdict stays as it
+    was)."""
     sealing = [e for e in EFFECTS.values() if e.load_law == "seal_pressure"]
     if not sealing:
         return None
@@ -494,14 +502,14 @@ def _friction_told(fit_recs, hold_recs, before: dict):
             rms = res.details.get("velocity_error", {}).get("rms_velocity_m_s", math.inf)
             (q,) = fx[effect.name]
             c = res.params[q]
-            if rms <= (1.0 - FRICTION_GAIN) * rms0 and c.ci95[0] >= FRICTION_CLEAR * c.value > 0.0:
+            if rms <= (1.0 - FRICTION_GAIN) * rms0 and c.value > 0.0:
                 told.append((rms, effect.name, fx, joint))
     if not told:
         return None
     _, name, fx, joint = min(told, key=lambda t: t[0])
     after = mean_errors(joint, fx, hold_recs)
     gain = shrink(before, after)
-    if not gain > 0.0:
+    if not (gain > 0.0 or sum(after.values()) <= beyond_noise):
         return None
     cost = fit_cost(joint, fx, fit_recs)
     return Candidate(name, fx[name], cost, after, gain, score=1.0, values=joint)
@@ -590,7 +598,7 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     threshold = beyond_noise + sum(spread.values())
     gap = sum(before.values()) > beyond_noise
     if not gap:        # nothing beyond the noise: no output fit can show more
-        told = _friction_told(fit_recs, hold_recs, before)
+        told = _friction_told(fit_recs, hold_recs, before, beyond_noise)
         att = Attribution(before, noise, gap, [told] if told else [], [told.name] if told else [])
         att.threshold, att.spread, att.beyond_noise, att.told = threshold, spread, beyond_noise, told is not None
         att.probabilities, att.effective_samples, att.fit_samples = _weigh(att.candidates, before, None, noise,
@@ -623,7 +631,7 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
         cands.sort(key=lambda c: set_name(c) != top)      # the verdict's candidate first (the report's)
     else:            # the baseline stands, unless the load's own fit tells pressure_friction
         verdict = []
-        told = _friction_told(fit_recs, hold_recs, before)
+        told = _friction_told(fit_recs, hold_recs, before, beyond_noise)
         if told is not None:       # weighed in place of its output fit (the verdict is the load fit's)
             verdict = [told.name]
             cands = [told] + [c for c in cands if c.name != told.name]
@@ -815,7 +823,7 @@ def _fit_pair(args):
 
 __all__ = [
     "CANDIDATES", "FORMS", "FRESH_SCREEN", "MIN_SHRINK", "MIN_SHRINK_SECOND", "PAIR_POOL", "SCREEN_POINTS", "SCREEN",
-    "PAIR_EVALUATIONS", "PAIR_ALWAYS", "GROW_EVALUATIONS", "GROW", "FRICTION_GAIN", "FRICTION_CLEAR", "RTOL",
+    "PAIR_EVALUATIONS", "PAIR_ALWAYS", "GROW_EVALUATIONS", "GROW", "FRICTION_GAIN", "RTOL",
     "FIT_RTOL", "errors", "mean_errors", "fit_cost", "Candidate", "fit_effects", "Attribution",
     "fit_with_load", "fit_stribeck", "fit_seal_laws", "may_start_processes", "baseline_spread",
     "attribute", "set_name", "PAIR_JOBS", "pair_combos", "simple_laws", "wider_laws", "law_of", "fit_pair_jointly",
