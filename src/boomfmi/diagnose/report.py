@@ -135,6 +135,7 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
            "gap_threshold": round(att.beyond_noise, 6),
            "gap_beyond_noise": att.gap,
            "told_by_load_fit": att.told,
+           "refused_by_load_fit": att.refused,
            "unexplained_threshold": round(att.threshold, 6),
            "probabilities": {k: round(v, 4) for k, v in att.probabilities.items()},
            "effective_samples": {k: round(v, 1) for k, v in att.effective_samples.items()},
@@ -453,12 +454,22 @@ def _html(doc: dict, images: list[str], embedded: dict | None = None) -> str:
 <h2>Candidate effects, best first</h2><p>Candidates are fitted beyond a gap (summed NRMSE) of {100 * doc.get("gap_threshold", 0.0):.3f} %:
 {NOISE_FACTOR:g} times the noise floor ({noise}) and {100 * ABS_FLOOR:g} %;
 a gap no candidate explains is "unexplained" beyond {100 * doc.get("unexplained_threshold", 0.0):.3f} %, which adds the
-baseline's own spread ({spread}).</p>
+baseline's own spread ({spread}).{_refused_html(doc)}</p>
 <table><tr><th>effect</th><th>fitted parameters</th><th>shrink</th><th>probability</th>
 <th>holdout NRMSE after (p_a / p_b / x)</th></tr>{rows}</table>
 {_next_experiment_html(doc, embedded)}
 {conf}
 </body></html>"""
+
+
+def _refused_html(doc: dict) -> str:
+    """The candidates the load's own fit contradicts (``doc["refused_by_load_fit"]``)."""
+    names = doc.get("refused_by_load_fit") or []
+    if not names:
+        return ""
+    return (" Not weighed, as the load's own fit does not tell them (a law of the load that its "
+            "velocity fit, on the recorded pressures, does not need): "
+            + ", ".join(html.escape(n) for n in names) + ".")
 
 
 def _next_experiment_html(doc: dict, embedded: dict | None) -> str:
