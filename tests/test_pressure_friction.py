@@ -221,7 +221,7 @@ def test_a_seal_friction_the_load_fit_does_not_tell_is_not_weighed(hybrid, tmp_p
     another stage is, and so is a seal friction the load's fit tells (the module's
     recordings with a true one)."""
     from boomfmi.diagnose.attribute import Candidate, _load_confirms
-    from boomfmi.experiments import manoeuvres, paper_multistep
+    from boomfmi.experiments import paper_multistep
     from boomfmi.recording import read_recording
     load = {"K_v": 2592.83, "F_s": 106.954, "F_d": 73.855, "F_L": 225.244, "M": 22.3764}
     plant = hybrid.Plant(**load, disturbances={"vibration": {"form": "sinusoidal", "amplitude": 64.44,
@@ -237,3 +237,30 @@ def test_a_seal_friction_the_load_fit_does_not_tell_is_not_weighed(hybrid, tmp_p
     kept, refused, told = _load_confirms([seal, heat], seal_recordings[:1])
     assert kept == [seal, heat] and refused == [] and {t[1] for t in told} == {"pressure_friction"}
     assert _load_confirms([heat], fit) == ([heat], [], None)       # nothing to confirm: no load fit run
+
+
+def test_a_refused_candidate_is_listed_last_unweighed_and_unpaired(seal_recordings, monkeypatch):
+    """attribute() with the fits stubbed: pressure_friction's candidate explains most of
+    the gap, heat_transfer some; the load's fit (stubbed) tells no seal law.  The seal
+    candidate is then neither weighed (no probability), nor paired, nor the verdict; it
+    is listed last with score 0 and named in ``refused``."""
+    from boomfmi.diagnose import attribute as A
+    values = {"K_v": 2600.0 * 1.4, "F_s": reference_rig.F_s, "F_d": reference_rig.F_d,
+              "F_L": reference_rig.F_L, "M": reference_rig.M}        # a baseline off the truth: a gap
+    fits = {"pressure_friction": ({"pressure_friction": {"c_max": 6e-5}}, 1e-5, {"p_a": 1e-3, "p_b": 1e-3, "x": 1e-3}),
+            "heat_transfer": ({"heat_transfer": {"n": 1.3}}, 2e-5, {"p_a": 5e-3, "p_b": 5e-3, "x": 5e-3})}
+
+    def fake_fit(args):
+        name = args[0]
+        fx, cost, after = fits[name]
+        return name, fx, cost, after, None
+    paired = []
+    monkeypatch.setattr(A, "_fit_and_score", fake_fit)
+    monkeypatch.setattr(A, "seal_told", lambda recs: [])
+    monkeypatch.setattr(A, "_pairs", lambda cands, *a, **k: paired.extend(c.name for c in cands) or [])
+    att = A.attribute(values, seal_recordings[:1], seal_recordings[1:], names=list(fits), workers=1)
+    assert att.gap
+    assert att.refused == ["pressure_friction"]
+    assert att.candidates[-1].name == "pressure_friction" and att.candidates[-1].score == 0.0
+    assert "pressure_friction" not in att.probabilities and "pressure_friction" not in att.verdict
+    assert paired == ["heat_transfer"]            # pairs were sought, among the kept candidates only

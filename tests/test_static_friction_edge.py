@@ -226,6 +226,7 @@ def test_the_quantum_is_found_on_a_fast_start_that_passes_a_level_a_sample():
     assert _quantum(readings) == pytest.approx(q, rel=0.02)
     assert _quantum(true) == 0.0
     assert _quantum(np.full(30, 0.0376)) == 0.0
+    assert _quantum(np.concatenate([readings, [np.nan]])) == pytest.approx(q, rel=0.02)    # a gap in the file
 
 
 def test_a_fast_start_off_a_stop_through_a_coarse_angle_does_not_read_a_late_start(hybrid):

@@ -172,7 +172,7 @@ def _identify_and_diagnose(fit, hold, out, ssp, log) -> dict:
     total = sum(before.values())
     summary["effects"] = {e["name"]: {"params": e["params"], "shrink": e["shrink"],
                                       "gain": round(total - sum(e["nrmse_holdout_after"].values()), 6)}
-                          for e in doc["effects"]}
+                          for e in doc["effects"] if not e.get("refused_by_load_fit")}
     conf = doc.get("confirmation") or {}
     summary["confirmation"] = {k: conf[k] for k in ("shrink", "reference_shrink", "agrees", "skipped", "error")
                                if k in conf}

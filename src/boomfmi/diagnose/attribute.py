@@ -55,7 +55,9 @@ and p_b.
   or taken a law that only fits alone).
 
 The verdict is the most probable explanation (:mod:`.evidence`): every candidate set
-(``none``: the baseline; each effect; each pair fitted) and ``unexplained`` (something
+(``none``: the baseline; each effect; each pair fitted; but a seal-pressure friction the
+load's own velocity fit does not tell, :func:`_load_confirms`, which is listed and not
+weighed) and ``unexplained`` (something
 not in the catalogue) weighed by its evidence on the fit and holdout recordings under
 their own noise (each channel's noise floor, the residuals' correlation in time as an
 effective sample count, a BIC penalty per parameter, a prior per effect); the
@@ -276,7 +278,7 @@ class Attribution:
     spread: dict = field(default_factory=dict)   #: the baseline's own uncertainty, per channel
     beyond_noise: float = 0.0  #: the summed NRMSE beyond which candidates are fitted (noise alone)
     told: bool = False         #: the verdict was told by the load's own fit (:func:`_friction_told`), not the gap
-    refused: list = field(default_factory=list)   #: candidates the load's own fit contradicts (:func:`_load_confirms`)
+    refused: list = field(default_factory=list)   #: names of the candidates the load's own fit does not tell (:func:`_load_confirms`), listed last and not weighed
     probabilities: dict = field(default_factory=dict)   #: {set: probability} (:mod:`.evidence`), the verdict's first
     effective_samples: dict = field(default_factory=dict)   #: the holdout's independent samples per channel
     fit_samples: float = 0.0   #: and the fit recordings', all channels
@@ -511,7 +513,8 @@ def seal_told(fit_recs) -> list:
     """The seal-pressure laws the load's own velocity fit tells on ``fit_recs``: those
     whose fit (the load identified with the law's coefficient, ``identify.fit``) misses
     the recorded velocities by ``FRICTION_GAIN`` less than the plain load's, over every
-    sliding run; as ``(rms velocity misfit [m/s], effect, its parameters, the load)``."""
+    sliding run, with a positive coefficient; as ``(rms velocity misfit [m/s], effect,
+    its parameters, the load)``."""
     if not sealing():
         return []
     rig, preps = _prepared(fit_recs)
@@ -539,8 +542,13 @@ def _load_confirms(cands, fit_recs) -> tuple[list, list, list | None]:
     something else: on calibration case 49 an engine's vibration, which such a
     candidate took for the seals' friction (holdout shrink 0.37, probability 1.00;
     velocity misfit 0.2 % lower).  On the 120 calibration cases every correct
-    pressure_friction verdict had its misfit 4.6 % or more lower.  Returns ``(kept,
-    refused, seal_told's list or None where no candidate needed it)``."""
+    pressure_friction verdict had its misfit 4.6 % or more lower.  A seal law that
+    saturates within the recordings' pressures (a constant factor on the friction, which
+    F_d takes whole) lowers the misfit not at all: such a friction is refused too,
+    though its outputs may show it at pressures the fit recordings do not reach (the
+    calibration's case 117 is one; its verdict named the heat transfer beside it alone
+    before and does now).  Returns ``(kept, refused, seal_told's list or None where no
+    candidate needed it)``."""
     seals = sealing()
     holding = [c for c in cands if seals & set(c.name.split("+"))]
     if not holding:
@@ -548,7 +556,8 @@ def _load_confirms(cands, fit_recs) -> tuple[list, list, list | None]:
     told = seal_told(fit_recs)
     names = {t[1] for t in told}
     refused = [c for c in holding if (seals & set(c.name.split("+"))) - names]
-    return [c for c in cands if c not in refused], refused, told
+    gone = {id(c) for c in refused}
+    return [c for c in cands if id(c) not in gone], refused, told
 
 
 def _cost(job) -> int:
@@ -864,7 +873,7 @@ def _fit_pair(args):
 
 __all__ = [
     "CANDIDATES", "FORMS", "FRESH_SCREEN", "MIN_SHRINK", "MIN_SHRINK_SECOND", "PAIR_POOL", "SCREEN_POINTS", "SCREEN",
-    "PAIR_EVALUATIONS", "PAIR_ALWAYS", "GROW_EVALUATIONS", "GROW", "FRICTION_GAIN", "RTOL",
+    "PAIR_EVALUATIONS", "PAIR_ALWAYS", "GROW_EVALUATIONS", "GROW", "FRICTION_GAIN", "RTOL", "sealing", "seal_told",
     "FIT_RTOL", "errors", "mean_errors", "fit_cost", "Candidate", "fit_effects", "Attribution",
     "fit_with_load", "fit_stribeck", "fit_seal_laws", "may_start_processes", "baseline_spread",
     "attribute", "set_name", "PAIR_JOBS", "pair_combos", "simple_laws", "wider_laws", "law_of", "fit_pair_jointly",

@@ -122,7 +122,8 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
     effects = [{"name": c.name, "params": c.params,
                 **({"baseline_params": {k: round(v, 6) for k, v in c.values.items()}} if c.values else {}),
                 "nrmse_holdout_after": {k: round(v, 6) for k, v in c.holdout.items()},
-                "fit_error": float(f"{c.fit_error:.6g}") if np.isfinite(c.fit_error) else None, "shrink": round(c.shrink, 4), "score": c.score}
+                "fit_error": float(f"{c.fit_error:.6g}") if np.isfinite(c.fit_error) else None, "shrink": round(c.shrink, 4), "score": c.score,
+                **({"refused_by_load_fit": True} if c.name in att.refused else {})}
                for c in att.candidates]
     doc = {"judgeable": True,
            "baseline": {"params": {k: round(v, 6) for k, v in values.items()},

@@ -577,13 +577,19 @@ def static_friction(motions: list[Motion], base: dict, cyl: ph.Cylinder, P_atm: 
             need = d * level_start[j:ie] - (raised_start[j:ie] if c else 0.0)
             rest = p.x_raw[j:max(j + 1, i0 - int(0.01 * p.fs))]
             q = _quantum(p.x_raw[j:min(len(p.x_raw), ie + int(0.05 * p.fs))])
+            spread = float(np.std(rest))
+            if q < FINEST_QUANTUM * max(spread, MODEL_SPREAD):
+                # a lattice far finer than the noise (a file's decimals) is no converter's
+                # rounding, and its bins, narrow against the likelihood's spread, would
+                # bring each reading's probability down towards the outlier floor
+                q = 0.0
             # a start's drive force is unsure by the linkage's terms' error over its window:
             # its root mean square (the largest overstates it two to three times: the terms
             # peak where the other joints accelerate hardest, not all through a start)
             unsure_start = (float(np.sqrt(np.mean((error[ri] / np.cos(p.phi))[j:ie + 1] ** 2)))
                             if error is not None else 0.0)
             events.append(dict(need=need, n=ie - j, r=r, j=j, ie=ie, d=d, t=float(p.t[i0]),
-                               reading=float(np.median(rest)), q=q, spread=float(np.std(rest)),
+                               reading=float(np.median(rest)), q=q, spread=spread,
                                filtered_off=filtered_off[j:ie],
                                M=mass_at(ri, j), unsure=unsure_start))
     if not events:
@@ -799,14 +805,15 @@ def _quantum(x: np.ndarray) -> float:
     on a 12-bit angle then held more levels than a third of its samples, so the
     rounding went unseen, each start's likelihood took the reading for exact, and the
     starts put F_s up to three times too high."""
-    levels = np.unique(x)
+    levels = np.unique(x[np.isfinite(x)])
     if len(levels) < 2:
         return 0.0
     gaps = np.diff(levels)
     q = float(gaps.min())
     steps = gaps / q
     whole = np.round(steps)
-    if np.any(whole > LATTICE_STEPS) or np.any(np.abs(steps - whole) > LATTICE_SLACK * whole):
+    if (np.any(whole > LATTICE_STEPS)
+            or np.any(np.abs(steps - whole) > np.minimum(LATTICE_SLACK * whole, LATTICE_MOST))):
         return 0.0
     return q
 
@@ -815,10 +822,16 @@ def _quantum(x: np.ndarray) -> float:
 #: the quantum, per step (an angle's quantum maps to a position's through the linkage,
 #: which stretches it by about 1 % over a start's few millimetres)
 LATTICE_SLACK = 0.05
+#: a lattice finer than this share of the rest's noise (or of MODEL_SPREAD) is not taken
+#: for a converter's rounding (a file's decimals: 1e-7 m against 3 um of noise)
+FINEST_QUANTUM = 0.1
+#: and at most this many steps off, however many steps a gap spans (so that a gap of
+#: many steps is still held to the lattice)
+LATTICE_MOST = 0.25
 #: the most steps between neighbouring readings on the lattice (a run that skips levels:
-#: 10 quanta a sample is 2 m/s for a 12-bit angle on the boom; readings that are not
+#: 8 quanta a sample is 1.5 m/s for a 12-bit angle on the boom; readings that are not
 #: rounded have gaps hundreds of times their smallest)
-LATTICE_STEPS = 10
+LATTICE_STEPS = 8
 
 
 def breakaways(p: Prepared, L: float, rest: float = 0.05, lead: float = 0.08, q: float = 4e-4):
