@@ -478,7 +478,8 @@ def _friction_told(fit_recs, hold_recs, before: dict, beyond_noise: float = 0.0,
       pneumatics, which the load's fit reads through the recorded pressures, moves it;
       on the 120 cases of ``diagnosis_blind.py --suite calibration`` each case without a
       seal-pressure friction stays within 0.8 % of its plain misfit, each with one
-      lowers it 3 % or more, or not at all where the seals' law saturates: a constant
+      lowers it 3 % or more, or not at all where it is too weak to show or its law
+      saturates: a constant
       factor on the friction, which F_d takes whole); and
     * the model with it does not predict the holdout worse than the baseline (shrink
       > 0), which was never fitted on, or leaves it within the noise (its summed NRMSE
