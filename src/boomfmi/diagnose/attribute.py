@@ -479,8 +479,7 @@ def _friction_told(fit_recs, hold_recs, before: dict, beyond_noise: float = 0.0,
       on the 120 cases of ``diagnosis_blind.py --suite calibration`` each case without a
       seal-pressure friction stays within 0.8 % of its plain misfit, each with one
       lowers it 3 % or more, or not at all where it is too weak to show or its law
-      saturates: a constant
-      factor on the friction, which F_d takes whole); and
+      saturates: a constant factor on the friction, which F_d takes whole); and
     * the model with it does not predict the holdout worse than the baseline (shrink
       > 0), which was never fitted on, or leaves it within the noise (its summed NRMSE
       within ``beyond_noise``): a holdout whose gap lies within its noise cannot refute
@@ -535,8 +534,8 @@ def seal_told(fit_recs) -> list:
 
 
 def _load_confirms(cands, fit_recs) -> tuple[list, list, list | None]:
-    """Split ``cands`` into those the load's own fit does not contradict and those it
-    does: a candidate holding a seal-pressure effect (its law lives in the load's
+    """Split ``cands`` into those the load's own fit allows and those it does not tell:
+    a candidate holding a seal-pressure effect (its law lives in the load's
     equation, Eq. 8 and 9, which the load's fit reads with the recorded pressures) that
     the load's velocity fit does not tell (:func:`seal_told`).  Its outputs' gain is
     then the re-identified load's (F_s, F_d moved with the coefficient) absorbing
@@ -686,7 +685,7 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
             probs, counts, n_fit = _weigh(cands, before, base_cost, noise, spread, base, fit_recs, hold_recs)
             for c in cands:
                 c.score = round(probs.get(set_name(c), 0.0), 4)
-    for c in refused:      # listed last, unweighed: the load's fit contradicts them
+    for c in refused:      # listed last, unweighed: the load's fit does not tell them
         c.score = 0.0
     att = Attribution(before, noise, gap, cands + refused, verdict)
     att.refused = [c.name for c in refused]

@@ -464,7 +464,7 @@ baseline's own spread ({spread}).{_refused_html(doc)}</p>
 
 
 def _refused_html(doc: dict) -> str:
-    """The candidates the load's own fit contradicts (``doc["refused_by_load_fit"]``)."""
+    """The candidates the load's own fit does not tell (``doc["refused_by_load_fit"]``)."""
     names = doc.get("refused_by_load_fit") or []
     if not names:
         return ""
