@@ -229,6 +229,27 @@ def test_the_quantum_is_found_on_a_fast_start_that_passes_a_level_a_sample():
     assert _quantum(np.concatenate([readings, [np.nan]])) == pytest.approx(q, rel=0.02)    # a gap in the file
 
 
+def test_the_quantum_is_found_where_the_linkage_stretches_it_along_a_long_start():
+    """Calibration case 118's long start: the position runs 82 levels of a 12-bit angle
+    (14 mm), over which the linkage stretches the position's step by 7 %, beyond the
+    slack against the smallest gap; held to a step that follows the position, the
+    lattice still shows, and the step returned is the one at the rest.  A stretch that
+    is not a straight line's (readings off the lattice) still shows none."""
+    from boomfmi.identify.fit import _quantum
+    q = 1.7e-4
+    rng = np.random.default_rng(11)
+    angle = np.concatenate([np.full(40, 0.0) + 0.3 * rng.standard_normal(40),
+                            np.linspace(0.0, 82.0, 200) + 0.4 * rng.standard_normal(200)])
+    levels = np.round(angle)
+    readings = 0.05 + q * (levels + 0.5 * 0.07 / 82.0 * levels ** 2)     # step q at rest, 1.07 q at the end
+    steps = np.diff(np.unique(readings)) / np.diff(np.unique(readings)).min()
+    assert np.max(np.abs(steps - np.round(steps)) / np.round(steps)) > 0.05     # beyond the plain lattice's slack
+    assert _quantum(readings) == pytest.approx(q, rel=0.01)
+    assert _quantum(readings[::-1]) == pytest.approx(1.07 * q, rel=0.01)     # a start downwards: rests at the top
+    jittered = readings + 0.3 * q * rng.standard_normal(readings.size)
+    assert _quantum(jittered) == 0.0
+
+
 def test_a_fast_start_off_a_stop_through_a_coarse_angle_does_not_read_a_late_start(hybrid):
     """benchmarks/diagnosis_blind.py's calibration case 68 (the load as drawn, a rounded
     valve deadband, a 12-bit angle sensor, random steps): the piston rests on its stop

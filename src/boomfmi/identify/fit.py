@@ -800,21 +800,42 @@ def _quantum(x: np.ndarray) -> float:
     its lattice (every gap between neighbouring distinct readings within
     ``LATTICE_SLACK`` per step of a whole number of steps, at most ``LATTICE_STEPS``:
     the sensor's rounding, levels a fast run skips included), however many levels the
-    motion passes through.  A count of
+    motion passes through; or, where the linkage stretches the step along a long start,
+    on a step that follows the position as a straight line (then the step at the first
+    reading, the rest, is returned).  A count of
     distinct readings cannot tell: a fast start passes a level a sample, and a window
     on a 12-bit angle then held more levels than a third of its samples, so the
     rounding went unseen, each start's likelihood took the reading for exact, and the
     starts put F_s up to three times too high."""
-    levels = np.unique(x[np.isfinite(x)])
+    finite = x[np.isfinite(x)]
+    levels = np.unique(finite)
     if len(levels) < 2:
         return 0.0
     gaps = np.diff(levels)
     q = float(gaps.min())
-    steps = gaps / q
-    whole = np.round(steps)
-    if np.any(whole > LATTICE_STEPS) or np.any(np.abs(steps - whole) > LATTICE_SLACK * whole):
+    if _on_lattice(gaps / q):
+        return q
+    # a lattice stretched along the travel: an angle's quantum maps to a position's
+    # through the linkage, whose ratio changes along a long start (7 % over 14 mm, 82
+    # levels, on the boom), beyond the slack against the smallest gap.  The step is
+    # read as a straight line in the position through the gaps of one step, every gap
+    # is held to it where it lies, and the step returned is the one at the rest
+    mid = 0.5 * (levels[:-1] + levels[1:])
+    one = np.round(gaps / q) == 1
+    if np.count_nonzero(one) < STRETCH_FIT_MIN or np.ptp(mid[one]) <= 0.0:
         return 0.0
-    return q
+    step_at = np.polynomial.Polynomial.fit(mid[one], gaps[one], 1)
+    q_mid = step_at(mid)
+    if np.any(q_mid <= 0.0) or not _on_lattice(gaps / q_mid):
+        return 0.0
+    return float(step_at(finite[0]))
+
+
+def _on_lattice(steps: np.ndarray) -> bool:
+    """Whether gaps, in steps of the quantum, are whole numbers of it (within
+    ``LATTICE_SLACK`` per step, at most ``LATTICE_STEPS``)."""
+    whole = np.round(steps)
+    return bool(np.all(whole <= LATTICE_STEPS) and np.all(np.abs(steps - whole) <= LATTICE_SLACK * whole))
 
 
 #: how far [steps] a gap between neighbouring readings may be from a whole number of
@@ -824,6 +845,8 @@ LATTICE_SLACK = 0.05
 #: a lattice finer than this share of the rest's noise (or of MODEL_SPREAD) is not taken
 #: for a converter's rounding (a file's decimals: 1e-7 m against 3 um of noise)
 FINEST_QUANTUM = 0.1
+#: the fewest one-step gaps through which a stretched lattice's step is read as a line
+STRETCH_FIT_MIN = 5
 #: the most steps between neighbouring readings on the lattice (a run that skips levels:
 #: 10 quanta a sample is 2 m/s for a 12-bit angle on the boom; readings that are not
 #: rounded have gaps hundreds of times their smallest).  At 10 steps the slack is half a
