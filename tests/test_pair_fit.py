@@ -79,3 +79,25 @@ def test_the_law_a_fit_holds_is_its_parameters_each_once_in_the_laws_order():
     assert law_of(laws, {"A": 1e-9}) == [b]
     assert law_of(laws, {"A": 1e-9, "C": 1e-12}) == [a, b]
     assert law_of(HEAT_LAWS, {"n": 1.3}) == HEAT_LAWS[1]
+
+
+def test_pairs_are_fitted_where_the_most_probable_single_leaves_the_gap():
+    """Calibration case 103 (a deadband beside a fast spool), its singles' figures: a
+    sensor lag shrinks the holdout's gap most (0.40), to within the noise, but the fit
+    recording prefers the deadband nine to one (shrink 0.28), and the singles weighed
+    say "unexplained".  Pairs were not fitted, as the best by shrink left nothing; the
+    pair of the truth then explained 0.85 of the gap.  Where the most probable single
+    is the best by shrink and leaves nothing beyond the noise, none are fitted."""
+    from boomfmi.diagnose.attribute import MIN_SHRINK, Candidate, pairs_needed
+    beyond = 0.0175
+    lag = Candidate("sensor_lag", {"tau": 2.7e-3}, 1.8e-4, {"p_a": 0.0045, "p_b": 0.0046, "x": 0.0031}, 0.396)
+    band = Candidate("valve_deadband", {"width_ext": 0.05}, 4.7e-5, {"p_a": 0.0065, "p_b": 0.0065, "x": 0.0016},
+                     0.277)
+    cands = [lag, band]                    # sorted by shrink, as attribute() sorts them
+    assert lag.shrink >= MIN_SHRINK and sum(lag.holdout.values()) < beyond
+    assert pairs_needed(cands, {"unexplained": 0.9988, "valve_deadband": 0.0012, "none": 0.0}, beyond)
+    assert pairs_needed(cands, {"valve_deadband": 0.9, "unexplained": 0.1}, beyond)    # it explains too little
+    assert not pairs_needed(cands, {"sensor_lag": 0.9, "unexplained": 0.1}, beyond)
+    assert not pairs_needed(cands, {"none": 0.9, "sensor_lag": 0.1}, beyond)
+    assert pairs_needed([band], {"valve_deadband": 1.0}, beyond)        # the best by shrink, as before
+    assert not pairs_needed([], {}, beyond)

@@ -41,7 +41,8 @@ and p_b.
   with the effect's form in it, the effect's parameters by output error).  No fit
   reads an effect's name: a stage, a fit, a load law or an integrator of its entry.
 * **Pairs.**  Where no single effect explains the gap (``MIN_SHRINK``), or the best
-  leaves one beyond the noise, pairs are fitted jointly (:func:`_pairs`) among every
+  leaves one beyond the noise (the best by holdout shrink, and the most probable
+  single where that is another or "unexplained": :func:`pairs_needed`), pairs are fitted jointly (:func:`_pairs`) among every
   candidate that lowers the fit recordings' error at all, whatever it does alone to the
   holdout (:func:`pair_combos`: two effects may each explain little alone, or one make
   the holdout worse with the other's misfit around it): both effects and the baseline
@@ -659,11 +660,8 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     cands, refused, told_by_load = _load_confirms(cands, fit_recs)
     cands.sort(key=lambda c: -c.shrink)
     pairs: list = []
-    # pairs where no single effect explains the gap, or where the best leaves more than
-    # the noise (the baseline's spread no longer counts: the best's fit has moved the
-    # model off the baseline already); a pair cannot show more than the noise otherwise
-    if cands and (cands[0].shrink < MIN_SHRINK
-                  or sum(cands[0].holdout.values()) > NOISE_FACTOR * sum(noise.values()) + ABS_FLOOR):
+    singles = _weigh(cands, before, base_cost, noise, spread, base, fit_recs, hold_recs)[0] if cands else {}
+    if pairs_needed(cands, singles, beyond_noise):
         pairs = _pairs(cands, values, fit_recs, hold_recs, before, workers, base_cost)
     probs, counts, n_fit = _weigh(cands + pairs, before, base_cost, noise, spread, base, fit_recs, hold_recs)
     cands = sorted(cands + pairs, key=lambda c: (-probs.get(set_name(c), 0.0), -c.shrink))
@@ -693,6 +691,32 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
     att.told, att.probabilities, att.effective_samples = told is not None, probs, counts
     att.fit_samples, att.fit_error = n_fit, base_cost
     return att
+
+
+def pairs_needed(cands: list, singles: Mapping, beyond_noise: float) -> bool:
+    """Whether pairs are fitted: where no single effect explains the gap (``MIN_SHRINK``
+    of it) or the best leaves more than the noise (``beyond_noise``: the baseline's
+    spread no longer counts, the best's fit has moved the model off the baseline
+    already), a pair cannot show more than the noise otherwise.  The best is the one
+    that shrinks the holdout's gap most (``cands`` sorted so), and the most probable
+    single set too (``singles``: the singles weighed, :func:`_weigh`), where that is
+    another or "unexplained": the effect the fit recordings prefer may leave the
+    holdout's gap to something outside the catalogue where a pair with it explains it
+    (calibration case 103: a deadband, preferred nine to one on the fit recording,
+    beside a fast spool; a sensor lag shrank the holdout most, to within the noise, and
+    no pair was fitted)."""
+    if not cands:
+        return False
+
+    def short(c: Candidate) -> bool:
+        return c.shrink < MIN_SHRINK or sum(c.holdout.values()) > beyond_noise
+    if short(cands[0]):
+        return True
+    top = next(iter(singles), NONE)
+    if top == UNEXPLAINED:
+        return True
+    lead = next((c for c in cands if set_name(c) == top), None)
+    return lead is not None and short(lead)
 
 
 def set_name(c: Candidate) -> str:
