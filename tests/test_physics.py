@@ -148,3 +148,28 @@ def test_numpy_scalars_take_the_float_path():
     x = np.array([0.25])[0]
     assert type(_xp.clip(x, 0.0, 0.2)) is float or _xp.clip(x, 0.0, 0.2) == 0.2
     assert _xp.where(np.bool_(True), 1.0, 2.0) == 1.0 and not isinstance(_xp.where(x > 0, 1.0, 2.0), np.ndarray)
+
+
+def test_a_scalar_orifice_flow_is_the_general_form_to_the_bit():
+    """mass_flow's fast path for one state (only the branch taken is evaluated) gives
+    exactly what the general form (every branch evaluated, one picked) gives on floats:
+    choked, subsonic and laminar ratios, the ends of the ratio's range, a NaN pressure
+    (choked, as the general form's comparison says); and the array form's value to
+    within a unit in the last place (NumPy's power is not libm's)."""
+    from boomfmi.physics import _xp as xp
+    from boomfmi.physics.orifice import R_LAMINAR, _constants, _subsonic_root
+
+    def general(A, P_u, P_d, gas=ph.Gas()):
+        P_cr, C, choked, laminar_slope = _constants(*gas)
+        r = xp.clip(P_d / P_u, 0.0, 1.0)
+        subsonic = C * _subsonic_root(xp.minimum(r, R_LAMINAR), gas.k)
+        laminar = laminar_slope * (1.0 - r)
+        return A * P_u * xp.where(r >= P_cr, xp.where(r > R_LAMINAR, laminar, subsonic), choked)
+    P_u = 6e5
+    for r in [0.0, 0.2, ph.critical_pressure_ratio(1.4), 0.53, 0.8, 0.998, 0.999, 0.9995, 1.0, 1.2]:
+        scalar = ph.mass_flow(2.5e-6, P_u, r * P_u)
+        assert scalar == general(2.5e-6, P_u, r * P_u), r
+        assert ph.mass_flow(np.float64(2.5e-6), np.float64(P_u), np.float64(r * P_u)) == scalar
+        array = ph.mass_flow(np.array([2.5e-6]), np.array([P_u]), np.array([r * P_u]))[0]
+        assert scalar == pytest.approx(array, rel=1e-15, abs=0.0)
+    assert ph.mass_flow(2.5e-6, P_u, float("nan")) == general(2.5e-6, P_u, 0.0)     # choked

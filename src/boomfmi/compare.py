@@ -10,6 +10,8 @@ Identification, diagnosis and ``boomfmi simulate`` all compare through these.
 """
 from __future__ import annotations
 
+import bisect
+
 import math
 
 import numpy as np
@@ -106,13 +108,16 @@ def _ramp(t: np.ndarray, u: np.ndarray, jumps: np.ndarray):
     through its samples' midpoints (half a sample after each sample: the held
     staircase's mean delay), never across a step (``jumps[k]``: a step between sample k
     and k + 1), held at a stretch's ends."""
-    seg = np.concatenate(([0], np.cumsum(jumps)))      # the stretch of each sample
-    mid = t + 0.5 * np.median(np.diff(t))
+    seg = np.concatenate(([0], np.cumsum(jumps))).tolist()      # the stretch of each sample
+    mid = (t + 0.5 * np.median(np.diff(t))).tolist()
+    # as lists of floats (the solver calls this at every step: NumPy's scalar indexing
+    # and searchsorted cost microseconds each; the same values, the same arithmetic)
+    times, u, n = t.tolist(), u.tolist(), len(u)
 
     def u_between(s: float) -> float:
-        i = max(0, int(np.searchsorted(t, s + 1e-9, side="right")) - 1)
+        i = max(0, bisect.bisect_right(times, s + 1e-9) - 1)
         j = i + 1 if s >= mid[i] else i - 1          # the neighbouring knot on s's side
-        if j < 0 or j >= len(u) or seg[j] != seg[i]:
+        if j < 0 or j >= n or seg[j] != seg[i]:
             return float(u[i])
         return float(u[i] + (s - mid[i]) / (mid[j] - mid[i]) * (u[j] - u[i]))
     return u_between

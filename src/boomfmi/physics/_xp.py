@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 _SCALARS = (float, int, np.float64)   #: NumPy's float64 scalar (what indexing an array gives) is one too
+SCALARS = _SCALARS                    #: the types a helper takes for one number (a caller's fast path)
 _BOOLS = (bool, np.bool_)
 
 

@@ -65,6 +65,15 @@ def mass_flow(A, P_u, P_d, gas: Gas = Gas()):
     """
     k = gas.k
     P_cr, C, choked, laminar_slope = _constants(*gas)
+    if type(A) in xp.SCALARS and type(P_u) in xp.SCALARS and type(P_d) in xp.SCALARS:
+        # one state's step (the reference solver calls this millions of times): only
+        # the branch taken is evaluated, with the same operations as below
+        r = xp.clip(P_d / P_u, 0.0, 1.0)
+        if not r >= P_cr:
+            return A * P_u * choked
+        if r > R_LAMINAR:
+            return A * P_u * (laminar_slope * (1.0 - r))
+        return A * P_u * (C * _subsonic_root(r, k))
     r = xp.clip(P_d / P_u, 0.0, 1.0)
     subsonic = C * _subsonic_root(xp.minimum(r, R_LAMINAR), k)
     laminar = laminar_slope * (1.0 - r)
