@@ -11,7 +11,6 @@ Identification, diagnosis and ``boomfmi simulate`` all compare through these.
 from __future__ import annotations
 
 import bisect
-
 import math
 
 import numpy as np

@@ -42,10 +42,11 @@ and p_b.
   reads an effect's name: a stage, a fit, a load law or an integrator of its entry.
 * **Pairs.**  Where no single effect explains the gap (``MIN_SHRINK``), or the best
   leaves one beyond the noise (the best by holdout shrink, and the most probable
-  single where that is another or "unexplained": :func:`pairs_needed`), pairs are fitted jointly (:func:`_pairs`) among every
-  candidate that lowers the fit recordings' error at all, whatever it does alone to the
-  holdout (:func:`pair_combos`: two effects may each explain little alone, or one make
-  the holdout worse with the other's misfit around it): both effects and the baseline
+  single where that is another or "unexplained": :func:`pairs_needed`), pairs are
+  fitted jointly (:func:`_pairs`) among every candidate that lowers the fit
+  recordings' error at all, whatever it does alone to the holdout
+  (:func:`pair_combos`: two effects may each explain little alone, or one make the
+  holdout worse with the other's misfit around it): both effects and the baseline
   together (a friction effect's load re-identified with it), from the singles' fits
   (:func:`fit_pair_jointly`).  The cost is capped by a budget: at most ``PAIR_JOBS``
   joint fits (as many as the former pool of five candidates allowed), the pairs whose

@@ -822,7 +822,7 @@ def _quantum(x: np.ndarray) -> float:
     # is held to it where it lies, and the step returned is the one at the rest
     mid = 0.5 * (levels[:-1] + levels[1:])
     one = np.round(gaps / q) == 1
-    if np.count_nonzero(one) < STRETCH_FIT_MIN or np.ptp(mid[one]) <= 0.0:
+    if np.count_nonzero(one) < STRETCH_FIT_MIN:       # (distinct levels: their midpoints differ)
         return 0.0
     step_at = np.polynomial.Polynomial.fit(mid[one], gaps[one], 1)
     q_mid = step_at(mid)

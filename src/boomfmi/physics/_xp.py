@@ -12,49 +12,48 @@ import math
 
 import numpy as np
 
-_SCALARS = (float, int, np.float64)   #: NumPy's float64 scalar (what indexing an array gives) is one too
-SCALARS = _SCALARS                    #: the types a helper takes for one number (a caller's fast path)
+SCALARS = (float, int, np.float64)   #: NumPy's float64 scalar (what indexing an array gives) is one too
 _BOOLS = (bool, np.bool_)
 
 
 def sqrt(x):
-    return math.sqrt(x) if type(x) in _SCALARS else np.sqrt(x)
+    return math.sqrt(x) if type(x) in SCALARS else np.sqrt(x)
 
 
 def exp(x):
-    return math.exp(x) if type(x) in _SCALARS else np.exp(x)
+    return math.exp(x) if type(x) in SCALARS else np.exp(x)
 
 
 def cos(x):
-    return math.cos(x) if type(x) in _SCALARS else np.cos(x)
+    return math.cos(x) if type(x) in SCALARS else np.cos(x)
 
 
 def sin(x):
-    return math.sin(x) if type(x) in _SCALARS else np.sin(x)
+    return math.sin(x) if type(x) in SCALARS else np.sin(x)
 
 
 def arccos(x):
-    return math.acos(x) if type(x) in _SCALARS else np.arccos(x)
+    return math.acos(x) if type(x) in SCALARS else np.arccos(x)
 
 
 def arcsin(x):
-    return math.asin(x) if type(x) in _SCALARS else np.arcsin(x)
+    return math.asin(x) if type(x) in SCALARS else np.arcsin(x)
 
 
 def maximum(x, y):
-    if type(x) in _SCALARS and type(y) in _SCALARS:
+    if type(x) in SCALARS and type(y) in SCALARS:
         return x if x >= y else y
     return np.maximum(x, y)
 
 
 def minimum(x, y):
-    if type(x) in _SCALARS and type(y) in _SCALARS:
+    if type(x) in SCALARS and type(y) in SCALARS:
         return x if x <= y else y
     return np.minimum(x, y)
 
 
 def clip(x, lo, hi):
-    if type(x) in _SCALARS and type(lo) in _SCALARS and type(hi) in _SCALARS:
+    if type(x) in SCALARS and type(lo) in SCALARS and type(hi) in SCALARS:
         return lo if x < lo else (hi if x > hi else x)
     return np.clip(x, lo, hi)
 
@@ -66,10 +65,10 @@ def where(cond, a, b):
 
 
 def sign(x):
-    if type(x) in _SCALARS:
+    if type(x) in SCALARS:
         return 1.0 if x > 0 else (-1.0 if x < 0 else 0.0)
     return np.sign(x)
 
 
 def abs_(x):
-    return abs(x) if type(x) in _SCALARS else np.abs(x)
+    return abs(x) if type(x) in SCALARS else np.abs(x)
