@@ -85,7 +85,7 @@ def test_a_friction_entry_without_a_fit_is_fitted_with_its_load(viscous, viscous
     preps = [prepare(fit, geometry=ph.Geometry())]
     plain = {k: v for k, v in identify(preps).values().items() if np.isfinite(v)}
     base_cost = fit_cost(plain, {}, [fit])
-    name, fx, cost, after, joint = _fit_and_score(("pressure_viscous", plain, [fit], [hold], None, base_cost))
+    name, fx, cost, after, joint, _ = _fit_and_score(("pressure_viscous", plain, [fit], [hold], None, base_cost))
     assert name == "pressure_viscous" and set(fx) == {name} and set(fx[name]) == {"c_v"}
     assert fx[name]["c_v"] == pytest.approx(C_V, rel=0.2)
     assert cost < 0.5 * base_cost

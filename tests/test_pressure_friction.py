@@ -253,7 +253,7 @@ def test_a_refused_candidate_is_listed_last_unweighed_and_unpaired(seal_recordin
     def fake_fit(args):
         name = args[0]
         fx, cost, after = fits[name]
-        return name, fx, cost, after, None
+        return name, fx, cost, after, None, []
     paired = []
     monkeypatch.setattr(A, "_fit_and_score", fake_fit)
     monkeypatch.setattr(A, "seal_told", lambda recs: [])

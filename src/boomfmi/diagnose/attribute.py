@@ -204,6 +204,8 @@ class Candidate:
     shrink: float = 0.0
     score: float = 0.0
     values: dict | None = None   #: the baseline re-identified with the effect (None: the common one)
+    #: the parameters the fit recordings cannot tell, told by the holdout (:func:`told_by_holdout`)
+    holdout_told: list = field(default_factory=list)
 
 
 def fit_effects(names: list[str], values: dict, fit_recs, start: dict | None = None,
@@ -296,9 +298,9 @@ def _fit_and_score(args):
     if not fixed:      # alone: the entry's own faster fit, or a friction effect's with its load
         hook = fit_hook(effect)
         if hook is not None:
-            return hook(effect, fit_recs, hold_recs)
+            return (*hook(effect, fit_recs, hold_recs), [])
         if effect.stage == "friction":
-            return _fit_friction(name, fit_recs, hold_recs)
+            return (*_fit_friction(name, fit_recs, hold_recs), [])
     forms = _laws(effect)
     # every law that holds no other's parameters screened, the one that screens best
     # refined; then a law that holds its parameters and more (a leak both laminar and
@@ -315,6 +317,7 @@ def _fit_and_score(args):
     fx, cost = fit_effects([name], values, fit_recs, fixed=fixed, forms={name: form}, baseline_cost=base_cost,
                            screened=(fx, cost))
     fx_narrow, cost_narrow = fx, cost
+    untold: list = []
     shows = cost <= (1.0 - GROW) * base_cost      # (an effect that barely shows cannot tell its law's shape)
     for wider, more in wider_laws(forms, form):
         held, cost_h = fit_effects([name], values, fit_recs, fixed={**(fixed or {}), name: fx_narrow[name]},
@@ -324,6 +327,8 @@ def _fit_and_score(args):
         # which the needle's law never touches)
         if not (shows or cost_h <= (1.0 - GROW) * base_cost):
             continue
+        if shows and not fixed and cost_h > (1.0 - SCREEN) * cost_narrow:
+            untold.append(more)     # its further parameter screened beside the fit tells nothing there
         fresh, cost_f = (fit_effects([name], values, fit_recs, fixed=fixed, forms={name: wider}, screen_only=True)
                          if (SCREEN_POINTS - 1) ** len(wider) <= FRESH_SCREEN else (None, math.inf))
         fx_w, cost_w = fit_effects([name], values, fit_recs, start=fresh if cost_f < cost_h else held,
@@ -335,7 +340,60 @@ def _fit_and_score(args):
         after_n = mean_errors(values, fx_narrow, hold_recs)     # parameters (not told by the fit
         if sum(after_n.values()) < sum(after.values()):         # recordings, they bend to a misfit)
             fx, cost, after = fx_narrow, cost_narrow, after_n
-    return name, fx, cost, after, None
+    told: list = []
+    for more in untold:
+        found = told_by_holdout(name, fx_narrow, cost_narrow, more,
+                                lambda e: fit_cost(values, e, fit_recs),
+                                lambda e: sum(mean_errors(values, e, hold_recs, FIT_RTOL).values()))
+        if found is None:
+            continue
+        after_t = mean_errors(values, found[0], hold_recs)
+        if sum(after_t.values()) < (1.0 - GROW) * sum(after.values()):
+            fx, cost, after, told = found[0], found[1], after_t, [more[0][0]]
+    return name, fx, cost, after, None, told
+
+
+def told_by_holdout(name: str, fx_narrow: dict, cost_narrow: float, more: list, fit_of, hold_of):
+    """A wider law's further parameter that the fit recordings cannot tell, told by the
+    holdout: ``(effects, fit cost)``, or None.
+
+    A speed limit that slow ramps never reach leaves the fit recordings' error the same
+    at every value (calibration case 64: a spool's lag and a slew-rate limit, fitted on
+    slow ramps, the limit shown by the holdout's steps).  An explanation's evidence is
+    ``p(fit) p(holdout | fit)`` (:mod:`.evidence`); where the fit recordings leave a
+    parameter open, the holdout's predictive is over every value they allow, not at one
+    they chose blindly.  So the further parameter (``more``: [(parameter, lower, upper,
+    log)], one) is screened over its range beside the narrower law's fit
+    (``fx_narrow``, its cost ``cost_narrow``); the values whose fit error
+    (``fit_of(effects)``) stays within ``SCREEN`` of the narrower law's are allowed (the
+    fit recordings cannot tell them apart); the one of them that predicts the holdout
+    best (``hold_of(effects)``: its summed NRMSE) is refined by a bounded search, and
+    kept where the fit recordings still allow it.  The parameter is then told by the
+    holdout, not by the fit recordings: the candidate says so (``Candidate.holdout_told``),
+    its holdout shrink is not a held-out figure for that parameter, and the evidence
+    charges it as a fitted parameter (BIC)."""
+    if len(more) != 1:
+        return None
+    p, lo, hi, log = more[0]
+    a, b = (math.log10(lo), math.log10(hi)) if log else (lo, hi)
+
+    def effects_at(z):
+        return {name: {**fx_narrow[name], p: float(10 ** z if log else z)}}
+    allowed_cost = (1.0 + SCREEN) * cost_narrow
+    grid = [a + (k + 0.5) / SCREEN_POINTS * (b - a) for k in range(SCREEN_POINTS)]
+    allowed = [z for z in grid if fit_of(effects_at(z)) <= allowed_cost]
+    if not allowed:
+        return None
+    held = {z: hold_of(effects_at(z)) for z in allowed}
+    z0 = min(held, key=held.get)
+    step = (b - a) / SCREEN_POINTS
+    res = minimize_scalar(lambda z: hold_of(effects_at(z)), bounds=(max(a, z0 - step), min(b, z0 + step)),
+                          method="bounded", options={"xatol": 0.01 * (b - a)})
+    for z in ((res.x, z0) if res.fun < held[z0] else (z0,)):
+        cost = fit_of(effects_at(z))
+        if cost <= allowed_cost:
+            return effects_at(z), cost
+    return None
 
 
 def _laws(effect) -> list:
@@ -655,8 +713,9 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
         return att
     base_cost = fit_cost(values, {}, fit_recs)
     fitted = _map(_fit_and_score, [(n, values, fit_recs, hold_recs, None, base_cost) for n in names], workers)
-    cands = [Candidate(n, fx[n], cost, after, shrink(before, after), values=joint)
-             for n, fx, cost, after, joint in fitted]
+    cands = [Candidate(n, fx[n], cost, after, shrink(before, after), values=joint,
+                       holdout_told=told)
+             for n, fx, cost, after, joint, told in fitted]
     # a seal-pressure effect the load's own fit does not tell is not weighed (nor paired)
     cands, refused, told_by_load = _load_confirms(cands, fit_recs)
     cands.sort(key=lambda c: -c.shrink)
@@ -901,5 +960,5 @@ __all__ = [
     "PAIR_EVALUATIONS", "PAIR_ALWAYS", "GROW_EVALUATIONS", "GROW", "FRICTION_GAIN", "RTOL", "sealing", "seal_told",
     "FIT_RTOL", "errors", "mean_errors", "fit_cost", "Candidate", "fit_effects", "Attribution",
     "fit_with_load", "fit_stribeck", "fit_seal_laws", "may_start_processes", "baseline_spread",
-    "attribute", "set_name", "PAIR_JOBS", "pair_combos", "simple_laws", "wider_laws", "law_of", "fit_pair_jointly",
+    "attribute", "set_name", "told_by_holdout", "PAIR_JOBS", "pair_combos", "simple_laws", "wider_laws", "law_of", "fit_pair_jointly",
 ]

@@ -123,7 +123,8 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
                 **({"baseline_params": {k: round(v, 6) for k, v in c.values.items()}} if c.values else {}),
                 "nrmse_holdout_after": {k: round(v, 6) for k, v in c.holdout.items()},
                 "fit_error": float(f"{c.fit_error:.6g}") if np.isfinite(c.fit_error) else None, "shrink": round(c.shrink, 4), "score": c.score,
-                **({"refused_by_load_fit": True} if c.name in att.refused else {})}
+                **({"refused_by_load_fit": True} if c.name in att.refused else {}),
+                **({"holdout_told": list(c.holdout_told)} if getattr(c, "holdout_told", None) else {})}
                for c in att.candidates]
     doc = {"judgeable": True,
            "baseline": {"params": {k: round(v, 6) for k, v in values.items()},
@@ -422,7 +423,9 @@ def _html(doc: dict, images: list[str], embedded: dict | None = None) -> str:
         if best and best["name"] == " + ".join(verdict):
             headline += f", fitted as {_params_text(best['name'], best['params'])}"
     rows = "".join(
-        f"<tr><td>{e(c['name'])}</td><td>{_params_text(c['name'], c['params'])}</td>"
+        f"<tr><td>{e(c['name'])}</td><td>{_params_text(c['name'], c['params'])}"
+        + (f" ({e(', '.join(c['holdout_told']))}: told by the holdout, which the fit recordings cannot tell; "
+           "the shrink is not held out for it)" if c.get("holdout_told") else "") + "</td>"
         f"<td>{c['shrink']:.3f}</td><td>{c['score']:.3f}</td>"
         f"<td>{' / '.join(f'{100 * v:.3f} %' for v in c['nrmse_holdout_after'].values())}</td></tr>"
         for c in doc.get("effects", []))
