@@ -181,3 +181,19 @@ def test_a_pair_s_parameters_are_shown_with_their_units():
     text = _params_text("valve_deadband + piston_leakage",
                         {"valve_deadband": {"width": 0.3}, "piston_leakage": {"C": 2e-11}})
     assert text == "valve_deadband.width = 0.3 V, piston_leakage.C = 2e-11 kg/(s&middot;Pa)"
+
+
+def test_a_parameter_told_by_the_holdout_is_named_so_in_the_report():
+    """A candidate whose further parameter the holdout told (the fit recordings could not)
+    says so beside its parameters: its shrink is no held-out figure for it."""
+    from boomfmi.diagnose.report import _html
+    doc = {"verdict": ["valve_dynamics"], "gap_beyond_noise": True,
+           "baseline": {"params": {"M": 20.0}, "nrmse_holdout": {"p_a": 0.2, "p_b": 0.16, "x": 0.05}, "warnings": []},
+           "effects": [{"name": "valve_dynamics", "params": {"tau": 0.0095, "rate": 145.0}, "shrink": 0.99,
+                        "score": 1.0, "nrmse_holdout_after": {"p_a": 0.003, "p_b": 0.002, "x": 0.001},
+                        "holdout_told": ["rate"]},
+                       {"name": "sensor_lag", "params": {"tau": 0.01}, "shrink": 0.34, "score": 0.0,
+                        "nrmse_holdout_after": {"p_a": 0.13, "p_b": 0.11, "x": 0.03}}]}
+    html = _html(doc, [])
+    assert html.count("told by the holdout") == 1
+    assert "rate: told by the holdout, which the fit recordings cannot tell" in html

@@ -23,6 +23,10 @@ and p_b.
   (a speed limit that slow ramps never reach is fitted to whatever else they miss, and
   the fit recordings alone cannot tell).  The holdout chooses between an effect's laws
   as the evidence chooses between sets (:mod:`.evidence`), on the same recordings.
+  Where the fit recordings cannot tell a further parameter at all (screened beside the
+  narrower law's fit, it moves their error nowhere by ``SCREEN``: slow ramps and a
+  speed limit), the holdout tells it among the values they allow
+  (:func:`told_by_holdout`), and the candidate says so (``Candidate.holdout_told``).
 * **Fits.**  An effect's parameters are fitted by output error of the whole model (the
   monolithic reference with the effect on, ``compare.simulate_recording``), each
   channel's residual over its range.  Its range is screened first
