@@ -597,7 +597,13 @@ def seal_told(fit_recs) -> list:
     return told
 
 
-def _load_confirms(cands, fit_recs) -> tuple[list, list, list | None]:
+def _fit_or_seals(job):
+    """A candidate's fit (:func:`_fit_and_score`), or, for ``(None, fit_recs)``, the
+    seal-pressure laws the load's own fit tells (:func:`seal_told`)."""
+    return seal_told(job[1]) if job[0] is None else _fit_and_score(job)
+
+
+def _load_confirms(cands, fit_recs, told: list | None = None) -> tuple[list, list, list | None]:
     """Split ``cands`` into those the load's own fit allows and those it does not tell:
     a candidate holding a seal-pressure effect (its law lives in the load's
     equation, Eq. 8 and 9, which the load's fit reads with the recorded pressures) that
@@ -612,12 +618,12 @@ def _load_confirms(cands, fit_recs) -> tuple[list, list, list | None]:
     though its outputs may show it at pressures the fit recordings do not reach (the
     calibration's case 117 is one; its verdict named the heat transfer beside it alone
     before and does now).  Returns ``(kept, refused, seal_told's list or None where no
-    candidate needed it)``."""
+    candidate needed it)``.  ``told``: :func:`seal_told`'s list, where it ran already."""
     seals = sealing()
     holding = [c for c in cands if seals & set(c.name.split("+"))]
     if not holding:
         return list(cands), [], None
-    told = seal_told(fit_recs)
+    told = seal_told(fit_recs) if told is None else told
     names = {t[1] for t in told}
     refused = [c for c in holding if (seals & set(c.name.split("+"))) - names]
     gone = {id(c) for c in refused}
@@ -716,12 +722,18 @@ def attribute(values: dict, fit_recs, hold_recs, names=None, workers: int | None
             c.score = round(att.probabilities.get(set_name(c), 0.0), 4)
         return att
     base_cost = fit_cost(values, {}, fit_recs)
-    fitted = _map(_fit_and_score, [(n, values, fit_recs, hold_recs, None, base_cost) for n in names], workers)
+    jobs = [(n, values, fit_recs, hold_recs, None, base_cost) for n in names]
+    # the load fits that tell a seal-pressure law (:func:`seal_told`) need no candidate's
+    # fit: run beside them, last (a pool's tail, where one process would wait)
+    seals = bool(sealing() & set(names))
+    done = _map(_fit_or_seals, jobs + ([(None, fit_recs)] if seals else []), workers,
+                cost=lambda job: -1 if job[0] is None else _cost(job))
+    fitted, seals_told = (done[:-1], done[-1]) if seals else (done, None)
     cands = [Candidate(n, fx[n], cost, after, shrink(before, after), values=joint,
                        holdout_told=told)
              for n, fx, cost, after, joint, told in fitted]
     # a seal-pressure effect the load's own fit does not tell is not weighed (nor paired)
-    cands, refused, told_by_load = _load_confirms(cands, fit_recs)
+    cands, refused, told_by_load = _load_confirms(cands, fit_recs, seals_told)
     cands.sort(key=lambda c: -c.shrink)
     pairs: list = []
     singles = _weigh(cands, before, base_cost, noise, spread, base, fit_recs, hold_recs)[0] if cands else {}
