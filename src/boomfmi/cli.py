@@ -339,8 +339,17 @@ def _diagnose(args) -> int:
 #: Run in each worker process of campaign's local cluster as it starts (Dask's worker
 #: preload, as script text): Ctrl-C reaches the whole process group, and only this
 #: process answers it (it cancels the cases, closes the cluster and says "interrupted");
-#: a worker that took it too would print its own KeyboardInterrupt traceback.
-_WORKER_IGNORES_SIGINT = "import signal\nsignal.signal(signal.SIGINT, signal.SIG_IGN)\n"
+#: a worker that took it too would print its own KeyboardInterrupt traceback.  And a
+#: worker whose scheduler went first (this process, interrupted, on a loaded machine)
+#: does not log its failed heartbeat with a traceback: the campaign is ending, and the
+#: cases' own records say what became of them.
+_WORKER_IGNORES_SIGINT = (
+    "import logging, signal\n"
+    "signal.signal(signal.SIGINT, signal.SIG_IGN)\n"
+    "class _SchedulerGone(logging.Filter):\n"
+    "    def filter(self, record):\n"
+    "        return 'communicate with scheduler during heartbeat' not in record.getMessage()\n"
+    "logging.getLogger('distributed.worker').addFilter(_SchedulerGone())\n")
 
 
 def _campaign(args) -> int:
