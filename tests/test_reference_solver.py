@@ -57,3 +57,16 @@ def test_the_boom_s_reference_is_the_same_to_the_bit_as_through_solve_ivp(monkey
     theirs = reference.simulate_reference(Model(effects=effects), prof, 3.0, breakpoints=bps, rtol=1e-6)
     for col in ("p_a", "p_b", "x", "v", "alpha"):
         assert np.array_equal(ours[col].to_numpy(), theirs[col].to_numpy(), equal_nan=True), col
+
+
+def test_a_model_whose_arithmetic_fails_is_a_solver_error_naming_the_time(monkeypatch):
+    """The right-hand side runs on Python floats: a division by zero raises where NumPy's
+    scalars gave inf.  The solve then fails as any solve that cannot go on does."""
+    from boomfmi import physics as ph
+
+    def broken(*args):
+        raise ZeroDivisionError("float division by zero")
+    monkeypatch.setattr(ph, "sliding_acceleration", broken)
+    prof = paper_multistep()
+    with pytest.raises(reference.SolverError, match=r"failed at t = 1\.0.* s: .*\(ZeroDivisionError"):
+        reference.simulate_reference(Model(), prof, 2.0, breakpoints=[b for b in prof.breakpoints if b < 2.0])

@@ -85,6 +85,9 @@ class Layout:
 def rhs(boom: Boom, layout: Layout, u: float, f_ext: float, mode: int, y) -> list:
     """The state's derivatives in ``mode`` (+1 / -1 sliding, 0 stuck) under the command
     ``u`` [V] and external force ``f_ext`` [N]."""
+    # the state as Python floats: the physics' scalar paths then run on floats, not NumPy
+    # scalars (the same IEEE operations, to the bit; a fifth of a simulation's time)
+    y = y.tolist()
     p_a, p_b, x, v = y[0], y[1], y[2], y[3]
     i_y, i_m = layout.i_y, layout.i_m
     cmd = y[i_y] if i_y is not None else u
@@ -331,6 +334,9 @@ def simulate_reference(model: Model, command: Callable[[float], dict], stop_time
                 raise SolverError(f"reference solver failed at t = {t:g} s: its steps collapsed ({err}); "
                                   f"the load's mechanical time constant M/K_v is "
                                   f"{model.load.M / model.load.K_v:.3g} s") from err
+            except ArithmeticError as err:   # a state where the model divides by zero or overflows (floats
+                raise SolverError(f"reference solver failed at t = {t:g} s: the model's arithmetic failed "
+                                  f"({type(err).__name__}: {err}) in a state its solver tried") from err
             if status < 0:
                 raise SolverError(f"reference solver failed at t = {t:g} s: {message}")
             y = np.array(y_end, dtype=float)
