@@ -385,19 +385,19 @@ def told_by_holdout(name: str, fx_narrow: dict, cost_narrow: float, more: list, 
         return {name: {**fx_narrow[name], p: float(10 ** z if log else z)}}
     allowed_cost = (1.0 + SCREEN) * cost_narrow
     grid = [a + (k + 0.5) / SCREEN_POINTS * (b - a) for k in range(SCREEN_POINTS)]
-    allowed = [z for z in grid if fit_of(effects_at(z)) <= allowed_cost]
-    if not allowed:
+    costs = {z: fit_of(effects_at(z)) for z in grid}
+    held = {z: hold_of(effects_at(z)) for z, cost in costs.items() if cost <= allowed_cost}
+    if not held:
         return None
-    held = {z: hold_of(effects_at(z)) for z in allowed}
     z0 = min(held, key=held.get)
     step = (b - a) / SCREEN_POINTS
     res = minimize_scalar(lambda z: hold_of(effects_at(z)), bounds=(max(a, z0 - step), min(b, z0 + step)),
                           method="bounded", options={"xatol": 0.01 * (b - a)})
-    for z in ((res.x, z0) if res.fun < held[z0] else (z0,)):
-        cost = fit_of(effects_at(z))
+    if res.fun < held[z0]:
+        cost = fit_of(effects_at(res.x))
         if cost <= allowed_cost:
-            return effects_at(z), cost
-    return None
+            return effects_at(res.x), cost
+    return effects_at(z0), costs[z0]     # (its fit error from the screen: allowed)
 
 
 def _laws(effect) -> list:

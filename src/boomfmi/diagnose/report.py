@@ -124,7 +124,7 @@ def diagnose(fit_paths, hold_paths, out_dir, workers: int | None = None, ssp=Non
                 "nrmse_holdout_after": {k: round(v, 6) for k, v in c.holdout.items()},
                 "fit_error": float(f"{c.fit_error:.6g}") if np.isfinite(c.fit_error) else None, "shrink": round(c.shrink, 4), "score": c.score,
                 **({"refused_by_load_fit": True} if c.name in att.refused else {}),
-                **({"holdout_told": list(c.holdout_told)} if getattr(c, "holdout_told", None) else {})}
+                **({"holdout_told": list(c.holdout_told)} if c.holdout_told else {})}
                for c in att.candidates]
     doc = {"judgeable": True,
            "baseline": {"params": {k: round(v, 6) for k, v in values.items()},
