@@ -22,7 +22,7 @@ from boomfmi.physics import (JOINTS, ParameterError, advance_linkage, advance_lo
                              joint_limits, kinetic_energy, lever_arms, lumped_boom_load, mass_matrix,
                              phi_from_x, piston_accelerations, pistons_from_angles, potential_energy,
                              tip_jacobian)
-from boomfmi.physics.linkage import cylinder_forces, mass_matrix_derivative, tip_torques
+from boomfmi.physics.linkage import Excavator, cylinder_forces, mass_matrix_derivative, piston_dynamics, tip_torques
 
 ROOT = Path(__file__).resolve().parents[1]
 EX = excavator_parameters()
@@ -209,6 +209,22 @@ def test_forces_that_hold_the_posture_give_no_acceleration(frac):
     more = hold.copy()
     more[1] *= 1.1
     assert piston_accelerations(x, np.zeros(4), more, f_tip, 1.0)[1] > 0.0
+
+
+def test_piston_dynamics_on_rows_is_the_same_at_every_row():
+    """``piston_dynamics`` on an (n, 4) array of states (identification's path: every
+    sample of a recording at once) gives each row what one state gives, to rounding."""
+    ex = Excavator()
+    rng = np.random.default_rng(4)
+    x = rng.uniform(0.02, 0.98, (50, 4)) * ex.strokes
+    v = rng.normal(0.0, 0.2, (50, 4))
+    for payload in (0.0, 1.5):
+        Mx, bias, lam = piston_dynamics(x, v, payload, ex)
+        assert Mx.shape == (50, 4, 4) and bias.shape == lam.shape == (50, 4)
+        for k in range(50):
+            one = piston_dynamics(x[k], v[k], payload, ex)
+            for rows, single in zip((Mx, bias, lam), one):
+                np.testing.assert_allclose(rows[k], single, rtol=1e-12, atol=1e-12 * np.max(np.abs(single)))
 
 
 def test_pressures_map_to_piston_forces():

@@ -207,3 +207,35 @@ def test_fmu_reports_the_bounds_as_the_physics(push_mid):
         np.testing.assert_allclose(res[f"f_tip_lo_{c}"][2:n + 1], lo[1:n, k], atol=1e-6, rtol=1e-6, err_msg=c)
         np.testing.assert_allclose(res[f"f_tip_hi_{c}"][2:n + 1], hi[1:n, k], atol=1e-6, rtol=1e-6, err_msg=c)
     assert np.any(hi[:n] - lo[:n] < 2 * F_BOUND - 1.0)      # the push is on: the interval is not the box
+
+
+def test_interval_ends_are_the_linear_programs_optima():
+    """tip_force_interval's ends (the polytope's vertices by Cramer's rule) against
+    scipy's linear programs (min and max of each axis over the same constraints), on
+    random postures and bands, some sides open."""
+    from scipy.optimize import linprog
+    ex = exc.Excavator()
+    rng = np.random.default_rng(7)
+    checked = 0
+    for _ in range(60):
+        x = rng.uniform(0.05, 0.95, 4) * ex.strokes
+        q = exc.joint_angles(x, ex)
+        JT = exc.tip_jacobian(q, ex).T
+        f = rng.normal(0.0, 40.0, 3)
+        centre = JT @ f
+        half = rng.uniform(0.5, 20.0, 4)
+        lo_t, hi_t = centre - half, centre + half
+        lo_t[rng.random(4) < 0.2] = -np.inf
+        hi_t[rng.random(4) < 0.2] = np.inf
+        lo, hi, ok = tip_force_interval(q, lo_t, hi_t, ex)
+        assert ok and np.all(lo <= f + 1e-6) and np.all(f <= hi + 1e-6)
+        A = np.vstack([JT[np.isfinite(hi_t)], -JT[np.isfinite(lo_t)]])
+        b = np.concatenate([hi_t[np.isfinite(hi_t)], -lo_t[np.isfinite(lo_t)]])
+        for k in range(3):
+            c = np.eye(3)[k]
+            for sign, end in ((1.0, lo[k]), (-1.0, hi[k])):
+                r = linprog(sign * c, A_ub=A, b_ub=b, bounds=[(-F_BOUND, F_BOUND)] * 3, method="highs")
+                assert r.status == 0
+                assert sign * r.fun == pytest.approx(end, abs=1e-6 * max(1.0, abs(end)))
+                checked += 1
+    assert checked == 360

@@ -117,6 +117,17 @@ def _lstsq(X, y):
     return th / scale
 
 
+def _normal_solve(G: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The least-squares solution from the normal equations ``G theta = r`` (``G`` the
+    scaled columns' Gram matrix): by Cholesky, or where a resample leaves ``G``
+    singular (a column it never excites), its minimum-norm solution, as ``lstsq`` gives."""
+    try:
+        c = np.linalg.cholesky(G)
+        return np.linalg.solve(c.T, np.linalg.solve(c, r))
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(G, r, rcond=None)[0]
+
+
 def equation_error(data: list[list[JointData]], n_boot: int = 200, block: float = 0.1, seed: int = 0,
                    cutoff: float = EE_CUTOFF):
     """Stage 1 over every recording: estimates ``{"K_v_<joint>", "F_d_<joint>",
@@ -141,12 +152,18 @@ def equation_error(data: list[list[JointData]], n_boot: int = 200, block: float 
     rng = np.random.default_rng(seed)
     starts = np.arange(0, max(1, n - b))
     Xw, yw = X * w[:, None], y * w
+    # each resample solved by its normal equations on the columns scaled as _lstsq
+    # scales them (the same least squares; a tenth of an SVD's time on these 10^4 rows)
+    scale = np.abs(Xw).max(axis=0)
+    scale[scale == 0] = 1.0
+    Xs = Xw / scale
     boots = []
     for _ in range(n_boot):
         picks = rng.choice(starts, size=max(1, n // b))
         idx = (picks[:, None] + np.arange(b)[None, :]).ravel()
         idx = idx[idx < n]
-        boots.append(_lstsq(Xw[idx], yw[idx]))
+        Xb = Xs[idx]
+        boots.append(_normal_solve(Xb.T @ Xb, Xb.T @ yw[idx]) / scale)
     lo, hi = np.percentile(np.array(boots), [2.5, 97.5], axis=0)
     est = {}
     for i, j in enumerate(JOINTS):

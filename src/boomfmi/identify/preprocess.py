@@ -177,8 +177,10 @@ STILL_MARGIN = 0.03
 def _others(Mx: np.ndarray, acc: np.ndarray, bias: np.ndarray) -> np.ndarray:
     """Each piston's share [N] of the other joints' inertia (``Mx`` [kg] times the
     accelerations ``acc`` [m/s^2], less its own) and of ``bias`` (velocity and gravity
-    terms, ``physics.linkage.piston_dynamics``)."""
-    return Mx @ acc - np.diag(Mx) * acc + bias
+    terms, ``physics.linkage.piston_dynamics``); at one sample or at every row ((n, 4, 4),
+    (n, 4), (n, 4))."""
+    own = np.diagonal(Mx, axis1=-2, axis2=-1) * acc
+    return np.einsum("...ij,...j->...i", Mx, acc) - own + bias
 
 
 def _prepare_linkage(rec, ex: exc.Excavator, cutoff: float) -> list[JointData]:
@@ -229,30 +231,23 @@ def _prepare_linkage(rec, ex: exc.Excavator, cutoff: float) -> list[JointData]:
     x2 = np.column_stack([lowpass(x_raw[:, i], fs, min(2.0 * cutoff, 0.45 * fs)) for i in range(4)])
     v2 = np.gradient(x2, t, axis=0)
     a2_moving = np.where(moving, np.gradient(v2, t, axis=0), 0.0)
-    coupling = np.empty((n, 4))
     xc = np.clip(x, 0.0, ex.strokes)
-    D = np.empty((2, n, 4))
-    own = np.empty((2, n, 4))
-    Mii = np.empty((2, n, 4))
-    unsure = np.empty((n, 4))
-    coupling_error = np.empty((n, 4))
-    zero = np.zeros(4)
-    for k in range(n):
-        for m in (0, 1):
-            Mx, bias, lam = exc.piston_dynamics(xc[k], v[k], float(m), ex)
-            D[m, k] = Mx @ a[k] + bias
-            own[m, k] = np.diag(Mx) * a[k]
-            Mii[m, k] = np.diag(Mx)
-            if m == 0:
-                # the other joints' inertia from where they move only (the velocity terms
-                # as they are: a resting joint's speed noise enters them squared)
-                Mx0 = Mx
-                coupling[k] = _others(Mx, a_moving[k], bias)
-        unsure[k] = np.abs(coupling[k] - exc.piston_dynamics(xc[k], zero, 0.0, ex)[1])
-        # M_x depends on the posture only: the faster filter's terms need its bias alone
-        coupling_error[k] = np.abs(coupling[k] - _others(Mx0, a2_moving[k],
-                                                         exc.piston_dynamics(xc[k], v2[k], 0.0, ex)[1]))
-        if f_tip is not None:
+    # the linkage's terms at every sample (without the payload, and their change per
+    # kilogram of it: they are linear in it)
+    (Mx0, bias0, _), (Mx1, bias1, _) = (exc.piston_dynamics(xc, v, m, ex) for m in (0.0, 1.0))
+    inertia = lambda Mx, acc: np.einsum("nij,nj->ni", Mx, acc)
+    diag0, diag1 = np.diagonal(Mx0, axis1=1, axis2=2), np.diagonal(Mx1, axis1=1, axis2=2)
+    D = np.stack([inertia(Mx0, a) + bias0, inertia(Mx1, a) + bias1])
+    own = np.stack([diag0 * a, diag1 * a])
+    Mii = np.stack([diag0, diag1])
+    # the other joints' inertia from where they move only (the velocity terms as they
+    # are: a resting joint's speed noise enters them squared)
+    coupling = _others(Mx0, a_moving, bias0)
+    unsure = np.abs(coupling - exc.piston_dynamics(xc, np.zeros_like(v), 0.0, ex)[1])
+    # M_x depends on the posture only: the faster filter's terms need its bias alone
+    coupling_error = np.abs(coupling - _others(Mx0, a2_moving, exc.piston_dynamics(xc, v2, 0.0, ex)[1]))
+    if f_tip is not None:
+        for k in np.flatnonzero(np.any(f_tip != 0.0, axis=1)):     # (a zero force has no torque)
             q = exc.joint_angles(xc[k], ex)
             tau = exc.tip_torques(q, f_tip[k], ex) / exc.lever_arms(xc[k], ex)
             D[0, k] -= tau

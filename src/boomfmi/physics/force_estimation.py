@@ -367,6 +367,11 @@ T_HOLD = 0.01
 _TRIPLES = np.array([(a, b, c) for a in range(14) for b in range(a + 1, 14) for c in range(b + 1, 14)])
 #: The pairs of those constraints (:func:`least_squares_in_set`'s two active ones).
 _PAIRS = np.array([(a, b) for a in range(14) for b in range(a + 1, 14)])
+#: For each triple (a, b, c) of :data:`_TRIPLES`, the rows of its pairs (b, c), (a, c)
+#: and (a, b) in :data:`_PAIRS` (whose planes' cross products Cramer's rule takes).
+_PAIR_OF = np.full((14, 14), -1)
+_PAIR_OF[_PAIRS[:, 0], _PAIRS[:, 1]] = np.arange(len(_PAIRS))
+_BC, _AC, _AB = (_PAIR_OF[_TRIPLES[:, i], _TRIPLES[:, j]] for i, j in ((1, 2), (0, 2), (0, 1)))
 
 
 def joint_force_bands(x, v, a, drive, sliding, at_lower, at_upper, ex: exc.Excavator = exc.Excavator(),
@@ -411,10 +416,16 @@ def _tip_force_set(q, tau_lo, tau_hi, ex: exc.Excavator, f_bound: float):
     big = 1e3 * f_bound * max(1.0, float(np.max(np.abs(JT))))
     b = np.concatenate([np.minimum(np.asarray(tau_hi, float), big), np.minimum(-np.asarray(tau_lo, float), big),
                         np.full(6, float(f_bound))])
-    A3, b3 = A[_TRIPLES], b[_TRIPLES]
-    det = np.linalg.det(A3)
+    # each triple's intersection by Cramer's rule on the planes' normals n_a, n_b, n_c:
+    # (b_a n_b x n_c + b_b n_c x n_a + b_c n_a x n_b) / (n_a . n_b x n_c), the cross
+    # products of every pair of planes formed once
+    u, w = A[_PAIRS[:, 0]].T, A[_PAIRS[:, 1]].T
+    cross = np.stack([u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]], axis=-1)
+    bc, ac, ab = cross[_BC], cross[_AC], cross[_AB]
+    ia, ib, ic = _TRIPLES.T
+    det = np.einsum("ij,ij->i", A[ia], bc)
     ok = np.abs(det) > 1e-9
-    verts = np.linalg.solve(A3[ok], b3[ok][..., None])[..., 0]
+    verts = ((b[ia, None] * bc - b[ib, None] * ac + b[ic, None] * ab)[ok]) / det[ok, None]
     inside = np.all(verts @ A.T <= b + 1e-7 * (np.abs(b) + 1.0), axis=1)
     return A, b, verts[inside]
 

@@ -54,6 +54,7 @@ from functools import cached_property
 
 import numpy as np
 
+from . import _xp as xp
 from . import reference_rig
 from .geometry import alpha_from_x, phi_from_x, x_from_alpha
 from .params import Cylinder, Geometry, Load, Valve
@@ -336,22 +337,25 @@ def lever_arms(x, ex: Excavator = _DEFAULT) -> np.ndarray:
 
 
 def _posture(x, ex: Excavator):
-    """At one posture, with plain floats: the joint angles q, lam = dq/dx [rad/m],
-    dlam = d^2 q / dx^2 and the boom's cos(phi) (Eq. 10)."""
+    """At one posture (``x`` 4 piston positions [m]), with plain floats, or at many
+    (``x`` of shape (n, 4): each entry an array over the n postures): the joint angles
+    q, lam = dq/dx [rad/m], dlam = d^2 q / dx^2 and the boom's cos(phi) (Eq. 10)."""
+    x = np.asarray(x, dtype=float) if not isinstance(x, (list, tuple)) else x
+    cols = [x[..., j] for j in range(4)] if getattr(x, "ndim", 1) > 1 else [float(x[j]) for j in range(4)]
     q = [0.0] * 4
     lam = [0.0] * 4
     dlam = [0.0] * 4
     for j, a in enumerate(ex.actuators):
-        xj = float(x[j])
+        xj = cols[j]
         l = a.l_min + xj
-        g = float(alpha_from_x(xj, ex.geometry)) if j == _BOOM else \
-            math.acos(min(1.0, max(-1.0, (a.c1 * a.c1 + a.c2 * a.c2 - l * l) / (2.0 * a.c1 * a.c2))))
+        g = alpha_from_x(xj, ex.geometry) if j == _BOOM else \
+            xp.arccos(xp.clip((a.c1 * a.c1 + a.c2 * a.c2 - l * l) / (2.0 * a.c1 * a.c2), -1.0, 1.0))
         q[j] = g + a.offset
-        s, c = math.sin(g), math.cos(g)
+        s, c = xp.sin(g), xp.cos(g)
         lj = l / (a.c1 * a.c2 * s)
         lam[j] = lj
         dlam[j] = lj / l - lj * lj * c / s
-    cos_phi = math.cos(phi_from_x(float(x[_BOOM]), ex.geometry))
+    cos_phi = xp.cos(phi_from_x(cols[_BOOM], ex.geometry))
     return q, lam, dlam, cos_phi
 
 
@@ -573,7 +577,8 @@ def _fast_posture(x, P: _Prepared):
 
 
 def _rigid_terms(q, qd, P: _Prepared):
-    """M (nested lists), C(q, q') q' and G at one posture, in closed form on plain floats.
+    """M (nested lists), C(q, q') q' and G at one posture, in closed form on plain floats
+    (or at many: ``q``, ``qd`` lists of arrays over the postures, entries arrays or 0.0).
 
     Planar part: ``M = D^T K D`` (see :class:`_Prepared`); ``(C q')_i = sum_k D_ki h_k``
     with ``h_k = sum_l S_kl sin(psi_k - psi_l) psi_l'^2`` (the point masses' centripetal
@@ -585,8 +590,8 @@ def _rigid_terms(q, qd, P: _Prepared):
     p0 = q[1] - P.beta
     p1 = p0 - q[2]
     p2 = p1 - q[3]
-    c0, c1, c2 = math.cos(p0), math.cos(p1), math.cos(p2)
-    s0, s1, s2 = math.sin(p0), math.sin(p1), math.sin(p2)
+    c0, c1, c2 = xp.cos(p0), xp.cos(p1), xp.cos(p2)
+    s0, s1, s2 = xp.sin(p0), xp.sin(p1), xp.sin(p2)
     c01, s01 = c0 * c1 + s0 * s1, s0 * c1 - c0 * s1
     c02, s02 = c0 * c2 + s0 * s2, s0 * c2 - c0 * s2
     c12, s12 = c1 * c2 + s1 * s2, s1 * c2 - c1 * s2
@@ -776,13 +781,34 @@ def piston_dynamics(x, v, payload: float = 0.0, ex: Excavator = _DEFAULT):
 
         M_x  = diag(lam) M(q) diag(lam),   lam = dq/dx = 1 / lever arm
         bias = diag(lam) (M(q) lam' v^2 + C(q, q') q' + G(q)),   q' = lam v
-    """
+
+    ``x``, ``v`` [m, m/s]: 4-vectors (one state), or arrays of shape (n, 4) (one state
+    per row, e.g. every sample of a recording: ``M_x`` (n, 4, 4), ``bias`` and ``lam``
+    (n, 4), the same closed forms on arrays)."""
     v = np.asarray(v, dtype=float)
+    if np.ndim(x) > 1:
+        return _piston_dynamics_rows(np.asarray(x, dtype=float), v, payload, ex)
     q, lam, dlam, _ = _posture(x, ex)
     lam, dlam = np.array(lam), np.array(dlam)
     M, Cq, G = (np.array(t) for t in _fast_terms(q, lam * v, ex, payload))
     Mx = lam[:, None] * M * lam[None, :]
     bias = lam * (M @ (dlam * v * v) + Cq + G)
+    return Mx, bias, lam
+
+
+def _piston_dynamics_rows(x: np.ndarray, v: np.ndarray, payload: float, ex: Excavator):
+    """:func:`piston_dynamics` at every row of ``x``, ``v`` (n, 4)."""
+    n = len(x)
+    v = np.broadcast_to(v, x.shape)
+    q, lam, dlam, _ = _posture(x, ex)
+    lam, dlam = np.stack(lam, axis=-1), np.stack(dlam, axis=-1)
+    qd = lam * v
+    M, Cq, G = _rigid_terms(q, [qd[:, j] for j in range(4)], _prepared(ex, float(payload)))
+    col = lambda e: np.broadcast_to(np.asarray(e, dtype=float), (n,))
+    M = np.stack([np.stack([col(e) for e in row], axis=-1) for row in M], axis=-2)
+    Cq, G = np.stack([col(e) for e in Cq], axis=-1), np.stack([col(e) for e in G], axis=-1)
+    Mx = lam[:, :, None] * M * lam[:, None, :]
+    bias = lam * (np.einsum("nij,nj->ni", M, dlam * v * v) + Cq + G)
     return Mx, bias, lam
 
 
