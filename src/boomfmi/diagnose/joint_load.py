@@ -341,12 +341,13 @@ def simulate(cut: LoadCut, values: dict, effects: dict | None = None) -> np.ndar
     last = len(F) - 1
     out = np.empty(len(F))
     step, stops = ph.slide_or_stick, ph.end_stops
+    K_v, F_s, F_d = base.K_v, base.F_s, base.F_d
     for i0, i1, x, v in cut.episodes:
         for k in range(i0, i1):
             out[k] = x
             f0 = F[k]
             df = F[min(k + 1, last)] - f0
-            ld = base._replace(M=M[k])
+            ld = ph.Load(K_v, F_s, F_d, 0.0, M[k])          # (base with this sample's mass)
             c = scale[k]
             for w in weights:
                 lk = boom.load_at(ld, v, pa[k], pb[k]) if rubbing else ld
