@@ -173,3 +173,30 @@ def test_a_scalar_orifice_flow_is_the_general_form_to_the_bit():
         array = ph.mass_flow(np.array([2.5e-6]), np.array([P_u]), np.array([r * P_u]))[0]
         assert scalar == pytest.approx(array, rel=1e-15, abs=0.0)
     assert ph.mass_flow(2.5e-6, P_u, float("nan")) == general(2.5e-6, P_u, 0.0)     # choked
+
+
+def test_flows_and_slopes_at_once_are_the_two_functions_to_the_bit():
+    """chamber_flows_and_slopes (each port's orifice evaluated once, the branch found once)
+    gives exactly chamber_flows and chamber_flow_slopes on one state: supply and exhaust
+    ports, closed, half-open and fully open valves, choked, subsonic and laminar ratios,
+    flow reversed (a chamber above the supply or below the exhaust); and the seal's leak
+    likewise (leakage_orifice_flow_and_slopes); on arrays, the same two functions."""
+    rng = np.random.default_rng(3)
+    v, g = ph.Valve(), ph.Gas()
+    near = lambda p: p * (1.0 + rng.uniform(-2e-3, 2e-3))          # the laminar band about a port
+    states = [(u, p_a, p_b) for u in (0.0, 2.0, 4.95, 5.0, 5.03, 7.5, 10.0)
+              for p_a in (6e4, v.P_e, near(v.P_e), 3e5, near(v.P_s), v.P_s, 8e5)
+              for p_b in (v.P_e, 2e5, near(v.P_s), 7.5e5)]
+    states += [tuple(s) for s in zip(rng.uniform(0, 10, 500), rng.uniform(5e4, 8e5, 500), rng.uniform(5e4, 8e5, 500))]
+    for u, p_a, p_b in states:
+        u, p_a, p_b = float(u), float(p_a), float(p_b)
+        both = ph.chamber_flows_and_slopes(u, p_a, p_b, v, g)
+        assert both == (*ph.chamber_flows(u, p_a, p_b, v, g), *ph.chamber_flow_slopes(u, p_a, p_b, v, g)), (u, p_a, p_b)
+        for A in (0.0, 3e-8):
+            leak = ph.effects.leakage_orifice_flow_and_slopes(p_a, p_b, A, g)
+            assert leak == (ph.effects.leakage_orifice_flow(p_a, p_b, A, g),
+                            *ph.effects.leakage_orifice_slopes(p_a, p_b, A, g)), (p_a, p_b, A)
+    u, p_a, p_b = (np.array(c, float) for c in zip(*states))
+    m_a, m_b, s_a, s_b = ph.chamber_flows_and_slopes(u, p_a, p_b, v, g)
+    np.testing.assert_array_equal(np.stack([m_a, m_b]), np.stack(ph.chamber_flows(u, p_a, p_b, v, g)))
+    np.testing.assert_array_equal(np.stack([s_a, s_b]), np.stack(ph.chamber_flow_slopes(u, p_a, p_b, v, g)))

@@ -65,21 +65,24 @@ def simulate_pneumatics(p: Prepared, boom: Boom):
     the orifices seeing its position at each step's middle."""
     n = len(p.t)
     pa, pb = np.empty(n), np.empty(n)
-    pa[0], pb[0] = float(p.p_a_raw[0]), float(p.p_b_raw[0])
-    x = np.clip(p.x, 0.0, boom.cylinder.L)
-    masses = list(boom.air_masses(pa[0], pb[0], float(x[0])))
+    p_a, p_b = float(p.p_a_raw[0]), float(p.p_b_raw[0])
+    pa[0], pb[0] = p_a, p_b
+    # the loop on Python floats (a NumPy scalar's arithmetic costs several times a float's)
+    x = np.clip(p.x, 0.0, boom.cylinder.L).tolist()
+    t, u = np.asarray(p.t, float).tolist(), np.asarray(p.u, float).tolist()
+    masses = list(boom.air_masses(p_a, p_b, x[0]))
     spool = boom.tau_spool > 0.0
-    y = float(p.u[0])
+    y = u[0]
     for k in range(n - 1):
-        x0 = float(x[k])
+        x0, dt = x[k], t[k + 1] - t[k]
         if spool:
-            y1 = boom.spool_step(y, float(p.u[k]), p.t[k + 1] - p.t[k])
+            y1 = boom.spool_step(y, u[k], dt)
             cmd, y = 0.5 * (y + y1), y1
         else:
-            cmd = float(p.u[k])
-        m_a, m_b, s_a, s_b = boom.chamber_inflows(boom.opening(cmd), pa[k], pb[k], x0)
-        pa[k + 1], pb[k + 1] = boom.step_chambers(pa[k], pb[k], x0, float(x[k + 1]), m_a, m_b, s_a, s_b,
-                                                  p.t[k + 1] - p.t[k], masses)
+            cmd = u[k]
+        m_a, m_b, s_a, s_b = boom.chamber_inflows(boom.opening(cmd), p_a, p_b, x0)
+        p_a, p_b = boom.step_chambers(p_a, p_b, x0, x[k + 1], m_a, m_b, s_a, s_b, dt, masses)
+        pa[k + 1], pb[k + 1] = p_a, p_b
     return pa, pb
 
 

@@ -182,11 +182,9 @@ class Boom:
         """The valve's flows into chambers A and B [kg/s] at the orifices' command ``cmd``
         [V] and absolute pressures [Pa] (Eq. 1), and each flow's slope in its chamber's
         pressure [kg/(s Pa)] (None unless ``slopes``)."""
-        m_a, m_b = ph.chamber_flows(cmd, p_a, p_b, self.valve, self.gas)
         if not slopes:
-            return m_a, m_b, None, None
-        s_a, s_b = ph.chamber_flow_slopes(cmd, p_a, p_b, self.valve, self.gas)
-        return m_a, m_b, s_a, s_b
+            return (*ph.chamber_flows(cmd, p_a, p_b, self.valve, self.gas), None, None)
+        return ph.chamber_flows_and_slopes(cmd, p_a, p_b, self.valve, self.gas)
 
     # --------------------------------------------------------------- chambers
     def inflows(self, m_a, m_b, s_a, s_b, p_a: float, p_b: float, x: float):

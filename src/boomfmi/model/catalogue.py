@@ -148,11 +148,12 @@ def _cushion(m_a, m_b, s_a, s_b, p_a, p_b, x, q, model):
 
 def _leak(m_a, m_b, s_a, s_b, p_a, p_b, x, q, model):
     C, A = q.get("C", 0.0), q.get("A", 0.0)
-    leak = fx.leakage_flow(p_a, p_b, C) + fx.leakage_orifice_flow(p_a, p_b, A, model.gas)
-    if s_a is not None:
-        g_a, g_b = fx.leakage_orifice_slopes(p_a, p_b, A, model.gas)
-        s_a, s_b = s_a - C + g_a, s_b - C + g_b
-    return m_a - leak, m_b + leak, s_a, s_b
+    if s_a is None:
+        leak = fx.leakage_flow(p_a, p_b, C) + fx.leakage_orifice_flow(p_a, p_b, A, model.gas)
+        return m_a - leak, m_b + leak, s_a, s_b
+    orifice, g_a, g_b = fx.leakage_orifice_flow_and_slopes(p_a, p_b, A, model.gas)
+    leak = fx.leakage_flow(p_a, p_b, C) + orifice
+    return m_a - leak, m_b + leak, s_a - C + g_a, s_b - C + g_b
 
 
 # friction: (load, v, p_a, p_b, params, model) -> load, v, p_a, p_b floats or arrays alike

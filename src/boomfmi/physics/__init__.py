@@ -21,11 +21,11 @@ from .lag import first_order_step
 from .load import (acceleration, advance_load, drive_force, friction_force, piston_force,
                    slide_or_stick, sliding_acceleration, sliding_velocity, end_stops)
 from .orifice import (critical_pressure_ratio, flow_at, mass_flow, mass_flow_slope, signed_mass_flow,
-                      signed_mass_flow_slope)
+                      signed_mass_flow_and_slope, signed_mass_flow_slope)
 from .params import (Cylinder, Gas, Geometry, Load, Valve, check_cylinder, check_gas,
                      check_load, check_valve)
 from .validation import ParameterError
-from .valve import chamber_flow_slopes, chamber_flows, orifice_area
+from .valve import chamber_flow_slopes, chamber_flows, chamber_flows_and_slopes, orifice_area
 
 __all__ = [
     "effects", "reference_rig", "chamber_pressure_step", "chamber_volumes", "pressure_rates",
@@ -38,6 +38,7 @@ __all__ = [
     "critical_pressure_ratio", "mass_flow", "signed_mass_flow", "Cylinder", "Gas",
     "Geometry", "Load", "Valve", "check_cylinder", "check_gas", "check_load",
     "check_valve", "ParameterError", "chamber_flows", "orifice_area", "chamber_flow_slopes",
+    "chamber_flows_and_slopes", "signed_mass_flow_and_slope",
     "mass_flow_slope", "signed_mass_flow_slope", "flow_at", "chamber_inflows", "sliding_acceleration",
     "JOINTS", "Actuator", "Excavator", "Link", "advance_linkage", "check_excavator", "coriolis",
     "cylinder_forces", "cylinder_torques", "excavator_parameters", "forward_kinematics", "gravity",

@@ -78,19 +78,23 @@ def chamber_pressure_step(P_0: float, V_0: float, V_1: float, mdot: float, dt: f
     if dmdot_dP == 0.0:
         integral = dt * V_0 ** (k - 1.0) * _mean_power(V_0, V_1, k - 1.0)
         return (P_0 * V_0**k + k * R * T * mdot * integral) / V_1**k
-    n = 4
-    h = dt / n
+    h = dt / _SUBSTEPS
     kRT = k * R * T
+    kRT_slope, dV, k1 = kRT * dmdot_dP, V_1 - V_0, k - 1.0
     source = mdot - dmdot_dP * P_0
     y = P_0 * V_0**k
-    for i in range(n):
-        V = V_0 + (V_1 - V_0) * (i + 0.5) / n
-        lam = kRT * dmdot_dP / V
-        z = lam * h
+    for middle in _MIDDLES:             # (the hot loop: what does not change is computed once)
+        V = V_0 + dV * middle / _SUBSTEPS
+        z = kRT_slope / V * h
         e = math.exp(z)
         phi1 = math.expm1(z) / z if abs(z) > 1e-8 else 1.0 + 0.5 * z
-        y = e * y + h * phi1 * kRT * V ** (k - 1.0) * source
+        y = e * y + h * phi1 * kRT * V ** k1 * source
     return y / V_1**k
+
+
+#: chamber_pressure_step's substeps with a valve's slope, and their middles (in substeps)
+_SUBSTEPS = 4
+_MIDDLES = tuple(i + 0.5 for i in range(_SUBSTEPS))
 
 
 __all__ = ["chamber_volumes", "pressure_rates", "chamber_inflows", "chamber_pressure_step"]

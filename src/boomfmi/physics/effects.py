@@ -17,7 +17,7 @@ import numpy as np
 
 from . import _xp as xp
 from .lag import first_order_step
-from .orifice import signed_mass_flow, signed_mass_flow_slope
+from .orifice import signed_mass_flow, signed_mass_flow_and_slope, signed_mass_flow_slope
 from .params import Cylinder, Gas, Load
 from .validation import ParameterError
 
@@ -144,6 +144,17 @@ def leakage_orifice_slopes(p_a: float, p_b: float, A: float, gas: Gas = Gas()) -
     if A <= 0.0:
         return 0.0, 0.0
     return float(signed_mass_flow_slope(A, p_b, p_a, gas)), float(signed_mass_flow_slope(A, p_a, p_b, gas))
+
+
+def leakage_orifice_flow_and_slopes(p_a: float, p_b: float, A: float, gas: Gas = Gas()) -> tuple[float, float, float]:
+    """:func:`leakage_orifice_flow` and :func:`leakage_orifice_slopes` at once: ``(leak
+    A to B [kg/s], d/dp_a of A's inflow, d/dp_b of B's [kg/(s Pa)])``, each orifice
+    evaluated once (``orifice.signed_mass_flow_and_slope``)."""
+    if A <= 0.0:
+        return 0.0, 0.0, 0.0
+    leak, g_b = signed_mass_flow_and_slope(A, p_a, p_b, gas)
+    _, g_a = signed_mass_flow_and_slope(A, p_b, p_a, gas)
+    return float(leak), float(g_a), float(g_b)
 
 
 def stribeck_weight(v, v_s: float):
@@ -326,7 +337,7 @@ def sensor_lag_step(measured: float, true: float, dt: float, tau: float) -> floa
 __all__ = [
     "spool_lag_step", "spool_rate", "deadband_command", "thermal_relaxation_step", "thermal_relaxation_rate",
     "outflow_temperature_rate", "chamber_wall_area", "thermal_time_constant", "leakage_flow",
-    "leakage_orifice_flow", "leakage_orifice_slopes", "stribeck_weight", "stribeck_level",
+    "leakage_orifice_flow", "leakage_orifice_slopes", "leakage_orifice_flow_and_slopes", "stribeck_weight", "stribeck_level",
     "stribeck_load", "seal_pressure", "pressure_friction_load", "cushion_engagement",
     "cushion_engagement_slope", "check_cushion_port", "cushion_port_cut", "cushion_flow",
     "cushion_flow_slope", "sensor_lag_step",

@@ -134,5 +134,33 @@ def signed_mass_flow_slope(A, P_1, P_2, gas: Gas = Gas()):
     return xp.where(forward, slope_d, -slope_u)
 
 
+def signed_mass_flow_and_slope(A, P_1, P_2, gas: Gas = Gas()):
+    """``(signed_mass_flow, signed_mass_flow_slope)`` at once [kg/s, kg/(s Pa)]: the flow
+    from side 1 into side 2 and its slope in ``P_2`` (the valve's local linearisation
+    that a chamber integrates against).  On one state (floats) the pressure ratio and
+    the branch are found once and only the branch taken is evaluated, with the same
+    operations as the two functions (the same values to the bit); on arrays, the two
+    functions."""
+    if not (type(A) in xp.SCALARS and type(P_1) in xp.SCALARS and type(P_2) in xp.SCALARS):
+        return signed_mass_flow(A, P_1, P_2, gas), signed_mass_flow_slope(A, P_1, P_2, gas)
+    forward = P_1 >= P_2
+    P_u, P_d = (P_1, P_2) if forward else (P_2, P_1)
+    k = gas.k
+    P_cr, C, choked, laminar_slope = _constants(*gas)
+    r = xp.clip(P_d / P_u, 0.0, 1.0)
+    if not r >= P_cr:
+        m, slope_d = A * P_u * choked, A * 0.0
+    elif r > R_LAMINAR:
+        m, slope_d = A * P_u * (laminar_slope * (1.0 - r)), A * -laminar_slope
+    else:
+        root = _subsonic_root(r, k)
+        m = A * P_u * (C * root)
+        g_prime = (2.0 / k) * r ** (2.0 / k - 1.0) - ((k + 1.0) / k) * r ** (1.0 / k)
+        slope_d = A * (C * g_prime / (2.0 * xp.maximum(root, 1e-300)))
+    if forward:
+        return m, slope_d
+    return -m, -(m / P_u - slope_d * P_d / P_u)
+
+
 __all__ = ["critical_pressure_ratio", "R_LAMINAR", "mass_flow", "mass_flow_slope", "flow_at", "signed_mass_flow",
-           "signed_mass_flow_slope"]
+           "signed_mass_flow_slope", "signed_mass_flow_and_slope"]

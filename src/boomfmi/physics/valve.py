@@ -10,7 +10,7 @@ its own experiment contradicts; see ``docs/paper-errata.md``):
 from __future__ import annotations
 
 from . import _xp as xp
-from .orifice import signed_mass_flow, signed_mass_flow_slope
+from .orifice import signed_mass_flow, signed_mass_flow_and_slope, signed_mass_flow_slope
 from .params import Gas, Valve
 
 
@@ -56,4 +56,17 @@ def chamber_flow_slopes(u, p_a, p_b, valve: Valve = Valve(), gas: Gas = Gas()):
             signed_mass_flow_slope(A, port_b, p_b, gas))
 
 
-__all__ = ["orifice_area", "chamber_flows", "chamber_flow_slopes"]
+def chamber_flows_and_slopes(u, p_a, p_b, valve: Valve = Valve(), gas: Gas = Gas()):
+    """:func:`chamber_flows` and :func:`chamber_flow_slopes` at once: ``(mdot_a, mdot_b,
+    dmdot_a/dp_a, dmdot_b/dp_b)`` [kg/s, kg/(s Pa)], each port's flow and slope from
+    one evaluation of its orifice (``orifice.signed_mass_flow_and_slope``)."""
+    A = orifice_area(u, valve)
+    extend = u < valve.u_centre
+    port_a = xp.where(extend, valve.P_s, valve.P_e)
+    port_b = xp.where(extend, valve.P_e, valve.P_s)
+    m_a, s_a = signed_mass_flow_and_slope(A, port_a, p_a, gas)
+    m_b, s_b = signed_mass_flow_and_slope(A, port_b, p_b, gas)
+    return m_a, m_b, s_a, s_b
+
+
+__all__ = ["orifice_area", "chamber_flows", "chamber_flow_slopes", "chamber_flows_and_slopes"]
