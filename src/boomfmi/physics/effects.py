@@ -175,7 +175,8 @@ def stribeck_load(load: Load, v: float, v_s: float) -> Load:
     (:func:`stribeck_level`); ``v_s <= 0`` leaves the paper's step."""
     if v_s <= 0.0:
         return load
-    return load._replace(F_d=stribeck_level(v, load.F_d, load.F_s, v_s))
+    K_v, F_s, F_d, F_L, M = load            # (built directly: namedtuple._replace costs 3 times as much)
+    return Load(K_v, F_s, stribeck_level(v, F_d, F_s, v_s), F_L, M)
 
 
 def seal_pressure(p_a, p_b, P_atm: float, form: str = "sum"):
@@ -226,7 +227,8 @@ def pressure_friction_load(load: Load, p_a: float, p_b: float, P_atm: float, c_s
         dF += c_diff * seal_pressure(p_a, p_b, P_atm, "diff")
     if dF == 0.0:
         return load
-    return load._replace(F_s=load.F_s + dF, F_d=load.F_d + dF)
+    K_v, F_s, F_d, F_L, M = load
+    return Load(K_v, F_s + dF, F_d + dF, F_L, M)
 
 
 def _cushion(mdot: float, p: float, distance: float, length: float, A_n: float, P_e: float,
