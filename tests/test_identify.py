@@ -201,3 +201,26 @@ def test_results_are_written_as_json_any_reader_takes():
            "ok": np.bool_(True), "x": np.array([1.0, np.nan])}
     assert plain(doc) == {"F_s": {"value": 97.0, "ci95": [None, None]}, "n": 3, "ok": True, "x": [1.0, None]}
     assert strict_json(dumps(doc))["F_s"]["ci95"] == [None, None]
+
+
+def test_the_block_bootstrap_solves_each_resample_as_least_squares():
+    """identify.fit.block_bootstrap (the boom's and the excavator's equation error): each
+    resample of blocks of rows solved by its normal equations on scaled columns is the
+    least squares of those rows (numpy's lstsq), columns a million apart in size; and
+    where a resample misses a column altogether (excited only in the first 50 rows), the
+    minimum-norm solution (that parameter 0), as lstsq gives."""
+    from boomfmi.identify.fit import block_bootstrap
+    rng = np.random.default_rng(0)
+    n, fs, block = 3000, 1000.0, 0.1
+    X = np.column_stack([rng.normal(size=n) * 1e3, np.zeros(n), rng.normal(size=n) * 1e-3, np.ones(n)])
+    X[:50, 1] = rng.normal(size=50)
+    y = X @ np.array([2.0, 7.0, 300.0, -5.0]) + rng.normal(size=n)
+    boots = block_bootstrap(X, y, fs, n_boot=30, block=block, seed=4)
+    draw, b = np.random.default_rng(4), int(block * fs)          # the same resamples, drawn again
+    missed = 0
+    for theta in boots:
+        idx = (draw.choice(np.arange(n - b), size=n // b)[:, None] + np.arange(b)).ravel()
+        idx = idx[idx < n]
+        np.testing.assert_allclose(theta, np.linalg.lstsq(X[idx], y[idx], rcond=None)[0], rtol=1e-8, atol=1e-9)
+        missed += not X[idx, 1].any()
+    assert 0 < missed < len(boots)

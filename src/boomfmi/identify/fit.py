@@ -227,6 +227,58 @@ def equation_rows(r: "Motion", cutoff: float = EE_CUTOFF, v_s: float = 0.0, pres
     return X, y, use
 
 
+def column_scale(X: np.ndarray) -> np.ndarray:
+    """Each column's largest magnitude (1 for a column of zeros): what the least squares
+    below divide the columns by, so that parameters of very different sizes (a mass in
+    kg, a force in N) are solved on columns of one size."""
+    scale = np.abs(X).max(axis=0)
+    scale[scale == 0] = 1.0
+    return scale
+
+
+def scaled_lstsq(X: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The least-squares ``theta`` of ``y ~ X theta``, solved on the scaled columns
+    (:func:`column_scale`)."""
+    scale = column_scale(X)
+    theta, *_ = np.linalg.lstsq(X / scale, y, rcond=None)
+    return theta / scale
+
+
+def _normal_solve(G: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The least-squares solution from the normal equations ``G theta = r`` (``G`` the
+    scaled columns' Gram matrix): by Cholesky, or where a resample leaves ``G``
+    singular (a column it never excites), its minimum-norm solution, as ``lstsq`` gives."""
+    try:
+        c = np.linalg.cholesky(G)
+        return np.linalg.solve(c.T, np.linalg.solve(c, r))
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(G, r, rcond=None)[0]
+
+
+def block_bootstrap(X: np.ndarray, y: np.ndarray, fs: float, n_boot: int = 200, block: float = 0.1,
+                    seed: int = 0) -> np.ndarray:
+    """The least squares of ``y ~ X theta`` on ``n_boot`` moving-block resamples of the
+    rows (blocks of ``block`` [s] of rows at ``fs`` [Hz]: neighbouring samples' errors
+    are correlated, so rows are drawn a block at a time), ``(n_boot, p)``; 95 %
+    intervals are their 2.5 and 97.5 percentiles.  Each resample is solved by its
+    normal equations on the scaled columns (:func:`column_scale`, :func:`_normal_solve`):
+    the same least squares as an SVD's, a tenth of its time on these 10^4 rows."""
+    scale = column_scale(X)
+    Xs = X / scale
+    rng = np.random.default_rng(seed)
+    b = max(1, int(block * fs))
+    n = len(y)
+    starts = np.arange(0, max(1, n - b))
+    boots = []
+    for _ in range(n_boot):
+        picks = rng.choice(starts, size=max(1, n // b))
+        idx = (picks[:, None] + np.arange(b)[None, :]).ravel()
+        idx = idx[idx < n]
+        Xb = Xs[idx]
+        boots.append(_normal_solve(Xb.T @ Xb, Xb.T @ y[idx]) / scale)
+    return np.array(boots)
+
+
 def equation_error(motions: list["Motion"], n_boot: int = 200, block: float = 0.1, seed: int = 0,
                    cutoff: float = EE_CUTOFF, v_s: float = 0.0, pressure: str | None = None):
     """Stage 1: M, K_v, F_d, F_L (and F_s, with a Stribeck velocity ``v_s``; and the
@@ -241,30 +293,15 @@ def equation_error(motions: list["Motion"], n_boot: int = 200, block: float = 0.
     X, y = np.vstack(X), np.concatenate(y)
     if len(y) < 50 or np.ptp(X[:, 2]) == 0.0:
         raise ValueError("too few samples in motion to identify the load: the recordings hold almost no motion")
-    scale = np.abs(X).max(axis=0)
-    scale[scale == 0] = 1.0
-    theta, *_ = np.linalg.lstsq(X / scale, y, rcond=None)
-    theta /= scale
-    cond = float(np.linalg.cond(X / scale))
-    rng = np.random.default_rng(seed)
-    fs = motions[0].p.fs
-    b = max(1, int(block * fs))
-    n = len(y)
-    starts = np.arange(0, max(1, n - b))
-    boots = []
-    for _ in range(n_boot):
-        picks = rng.choice(starts, size=max(1, n // b))
-        idx = (picks[:, None] + np.arange(b)[None, :]).ravel()
-        idx = idx[idx < n]
-        th, *_ = np.linalg.lstsq(X[idx] / scale, y[idx], rcond=None)
-        boots.append(th / scale)
-    boots = np.array(boots)
+    theta = scaled_lstsq(X, y)
+    cond = float(np.linalg.cond(X / column_scale(X)))
+    boots = block_bootstrap(X, y, motions[0].p.fs, n_boot, block, seed)
     lo, hi = np.percentile(boots, [2.5, 97.5], axis=0)
     names = ("M", "K_v", "F_d", "F_L") + (("F_s",) if v_s > 0.0 else ()) + \
         ((PRESSURE_COEFFICIENT[pressure],) if pressure is not None else ())
     est = {k: _widened(k, theta[j], min(lo[j], theta[j]), max(hi[j], theta[j])) for j, k in enumerate(names)}
     residual = y - X @ theta
-    return est, {"samples": int(n), "condition_number": cond,
+    return est, {"samples": len(y), "condition_number": cond,
                  "rms_residual_N": float(np.sqrt(np.mean(residual**2)))}
 
 

@@ -52,7 +52,7 @@ import numpy as np
 
 from .. import physics as ph
 from ..physics import linkage as exc
-from .fit import Estimate, FitResult, REACH, motion, static_friction, _widened
+from .fit import Estimate, FitResult, REACH, block_bootstrap, motion, scaled_lstsq, static_friction, _widened
 from .preprocess import CUTOFF, JointData, Prepared, lowpass, prepare_machine
 
 JOINTS = exc.JOINTS
@@ -110,24 +110,6 @@ def equation_rows(joints: list[JointData], cutoff: float = EE_CUTOFF):
     return np.vstack(Xs), np.concatenate(ys), np.concatenate(uses), np.concatenate(which)
 
 
-def _lstsq(X, y):
-    scale = np.abs(X).max(axis=0)
-    scale[scale == 0] = 1.0
-    th, *_ = np.linalg.lstsq(X / scale, y, rcond=None)
-    return th / scale
-
-
-def _normal_solve(G: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """The least-squares solution from the normal equations ``G theta = r`` (``G`` the
-    scaled columns' Gram matrix): by Cholesky, or where a resample leaves ``G``
-    singular (a column it never excites), its minimum-norm solution, as ``lstsq`` gives."""
-    try:
-        c = np.linalg.cholesky(G)
-        return np.linalg.solve(c.T, np.linalg.solve(c, r))
-    except np.linalg.LinAlgError:
-        return np.linalg.lstsq(G, r, rcond=None)[0]
-
-
 def equation_error(data: list[list[JointData]], n_boot: int = 200, block: float = 0.1, seed: int = 0,
                    cutoff: float = EE_CUTOFF):
     """Stage 1 over every recording: estimates ``{"K_v_<joint>", "F_d_<joint>",
@@ -138,33 +120,17 @@ def equation_error(data: list[list[JointData]], n_boot: int = 200, block: float 
     joint = np.concatenate([r[3][r[2]] for r in rows])
     # the recordings' blocks: a block never spans two joints' rows
     w = np.ones(len(y))
-    theta = _lstsq(X, y)
+    theta = scaled_lstsq(X, y)
     for _ in range(2):                       # each joint weighted by its residual's spread
         res = y - X @ theta
         for i in range(4):
             sel = joint == i
             sd = float(np.std(res[sel])) if sel.any() else 1.0
             w[sel] = 1.0 / max(sd, 1e-9)
-        theta = _lstsq(X * w[:, None], y * w)
-    fs = data[0][0].p.fs
-    b = max(1, int(block * fs))
-    n = len(y)
-    rng = np.random.default_rng(seed)
-    starts = np.arange(0, max(1, n - b))
+        theta = scaled_lstsq(X * w[:, None], y * w)
     Xw, yw = X * w[:, None], y * w
-    # each resample solved by its normal equations on the columns scaled as _lstsq
-    # scales them (the same least squares; a tenth of an SVD's time on these 10^4 rows)
-    scale = np.abs(Xw).max(axis=0)
-    scale[scale == 0] = 1.0
-    Xs = Xw / scale
-    boots = []
-    for _ in range(n_boot):
-        picks = rng.choice(starts, size=max(1, n // b))
-        idx = (picks[:, None] + np.arange(b)[None, :]).ravel()
-        idx = idx[idx < n]
-        Xb = Xs[idx]
-        boots.append(_normal_solve(Xb.T @ Xb, Xb.T @ yw[idx]) / scale)
-    lo, hi = np.percentile(np.array(boots), [2.5, 97.5], axis=0)
+    boots = block_bootstrap(Xw, yw, data[0][0].p.fs, n_boot, block, seed)
+    lo, hi = np.percentile(boots, [2.5, 97.5], axis=0)
     est = {}
     for i, j in enumerate(JOINTS):
         for k, name in ((i, "K_v"), (4 + i, "F_d")):
@@ -173,7 +139,7 @@ def equation_error(data: list[list[JointData]], n_boot: int = 200, block: float 
     est["payload"] = Estimate(float(theta[8]), (float(min(lo[8], theta[8]) - floor),
                                                 float(max(hi[8], theta[8]) + floor)), "kg")
     res = y - X @ theta
-    return est, {"samples": int(n), "condition_number": float(np.linalg.cond(Xw / np.abs(Xw).max(axis=0))),
+    return est, {"samples": len(y), "condition_number": float(np.linalg.cond(Xw / np.abs(Xw).max(axis=0))),
                  "rms_residual_N": {j: float(np.sqrt(np.mean(res[joint == i] ** 2))) for i, j in enumerate(JOINTS)}}
 
 
