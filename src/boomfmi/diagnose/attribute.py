@@ -305,27 +305,52 @@ def _fit_and_score(args):
             return (*hook(effect, fit_recs, hold_recs), [])
         if effect.stage == "friction":
             return (*_fit_friction(name, fit_recs, hold_recs), [])
-    forms = _laws(effect)
-    # every law that holds no other's parameters screened, the one that screens best
-    # refined; then a law that holds its parameters and more (a leak both laminar and
-    # turbulent, a cushion with its port's volume, a spool's lag with a speed limit)
-    # grown from that fit: its further parameters screened beside it, or the wider law
-    # screened afresh where that fits better (the narrower law's fit bends to mimic the
-    # wider one's shape: a slower lag for a speed limit), then all refined together,
-    # kept where it fits better and the holdout bears it out (a speed limit the fit
-    # recordings never reach is fitted to whatever else they miss)
+
+    def hold(effects):
+        after = mean_errors(values, effects, hold_recs)
+        return sum(after.values()), after
+    fx, cost, after, told = fit_laws(
+        name, _laws(effect), lambda **kw: fit_effects([name], values, fit_recs, **kw), hold, base_cost, fixed,
+        told_costs=(lambda e: fit_cost(values, e, fit_recs),
+                    lambda e: sum(mean_errors(values, e, hold_recs, FIT_RTOL).values())))
+    return name, fx, cost, after, None, told
+
+
+def fit_laws(name: str, forms: list, fit, hold, base_cost: float, fixed: dict | None = None,
+             refine_each: bool = False, told_costs=None):
+    """Effect ``name`` fitted over its laws ``forms`` (``_laws``: [[(parameter, lower,
+    upper, log)]]) and scored on the holdouts: the boom's whole model and a joint's cut
+    of the excavator alike.  ``fit(**options) -> (effects, cost)`` is
+    :func:`fit_effects` on the fit recordings (or their cuts, with its ``cost_of``);
+    ``hold(effects) -> (total, errors)`` the holdouts' summed error and its breakdown;
+    ``base_cost`` the fit error without the effect; ``fixed`` further effects held on;
+    ``told_costs``: ``(fit_of, hold_of)`` for :func:`told_by_holdout`.  Returns
+    ``(effects, cost, errors, told)`` (``told``: the parameters the holdout told).
+
+    Every law that holds no other's parameters is screened, and the one that screens
+    best refined (``refine_each``: each refined, the best kept: a cut's leak has an
+    orifice law whose narrow valley the screen's few points step over); then a law that
+    holds its parameters and more (a leak both laminar and turbulent, a cushion with
+    its port's volume, a spool's lag with a speed limit) is grown from that fit: its
+    further parameters screened beside it, or the wider law screened afresh where that
+    fits better (the narrower law's fit bends to mimic the wider one's shape: a slower
+    lag for a speed limit), then all refined together, kept where it fits better and
+    the holdout bears it out (a speed limit the fit recordings never reach is fitted to
+    whatever else they miss); a further parameter the fit recordings cannot tell is
+    told by the holdout where that lowers the holdout's error by ``GROW``."""
     simple = simple_laws(forms)
-    screens = [(*fit_effects([name], values, fit_recs, fixed=fixed, forms={name: form}, screen_only=True), form)
-               for form in simple]
-    fx, cost, form = min(screens, key=lambda f: f[1])
-    fx, cost = fit_effects([name], values, fit_recs, fixed=fixed, forms={name: form}, baseline_cost=base_cost,
-                           screened=(fx, cost))
+    if refine_each:
+        fits = [(*fit(fixed=fixed, forms={name: form}, baseline_cost=base_cost), form) for form in simple]
+        fx, cost, form = min(fits, key=lambda f: f[1])
+    else:
+        screens = [(*fit(fixed=fixed, forms={name: form}, screen_only=True), form) for form in simple]
+        fx, cost, form = min(screens, key=lambda f: f[1])
+        fx, cost = fit(fixed=fixed, forms={name: form}, baseline_cost=base_cost, screened=(fx, cost))
     fx_narrow, cost_narrow = fx, cost
     untold: list = []
     shows = cost <= (1.0 - GROW) * base_cost      # (an effect that barely shows cannot tell its law's shape)
     for wider, more in wider_laws(forms, form):
-        held, cost_h = fit_effects([name], values, fit_recs, fixed={**(fixed or {}), name: fx_narrow[name]},
-                                   forms={name: more}, screen_only=True)
+        held, cost_h = fit(fixed={**(fixed or {}), name: fx_narrow[name]}, forms={name: more}, screen_only=True)
         # where the narrower law shows nothing, the wider law is grown only where its further
         # parameters alone show something (a cushion without a check valve slows the return,
         # which the needle's law never touches)
@@ -333,28 +358,26 @@ def _fit_and_score(args):
             continue
         if shows and not fixed and cost_h > (1.0 - SCREEN) * cost_narrow:
             untold.append(more)     # its further parameter screened beside the fit tells nothing there
-        fresh, cost_f = (fit_effects([name], values, fit_recs, fixed=fixed, forms={name: wider}, screen_only=True)
+        fresh, cost_f = (fit(fixed=fixed, forms={name: wider}, screen_only=True)
                          if (SCREEN_POINTS - 1) ** len(wider) <= FRESH_SCREEN else (None, math.inf))
-        fx_w, cost_w = fit_effects([name], values, fit_recs, start=fresh if cost_f < cost_h else held,
-                                   fixed=fixed, forms={name: wider}, max_evaluations=GROW_EVALUATIONS)
+        fx_w, cost_w = fit(start=fresh if cost_f < cost_h else held, fixed=fixed, forms={name: wider},
+                           max_evaluations=GROW_EVALUATIONS)
         if cost_w < cost:
             fx, cost = fx_w, cost_w
-    after = mean_errors(values, fx, hold_recs)
+    total, after = hold(fx)
     if cost < cost_narrow:      # a wider law is kept only where the holdout bears out its further
-        after_n = mean_errors(values, fx_narrow, hold_recs)     # parameters (not told by the fit
-        if sum(after_n.values()) < sum(after.values()):         # recordings, they bend to a misfit)
-            fx, cost, after = fx_narrow, cost_narrow, after_n
+        total_n, after_n = hold(fx_narrow)      # parameters (not told by the fit recordings, they
+        if total_n < total:                     # bend to a misfit)
+            fx, cost, after, total = fx_narrow, cost_narrow, after_n, total_n
     told: list = []
     for more in untold:
-        found = told_by_holdout(name, fx_narrow, cost_narrow, more,
-                                lambda e: fit_cost(values, e, fit_recs),
-                                lambda e: sum(mean_errors(values, e, hold_recs, FIT_RTOL).values()))
+        found = told_by_holdout(name, fx_narrow, cost_narrow, more, *told_costs)
         if found is None:
             continue
-        after_t = mean_errors(values, found[0], hold_recs)
-        if sum(after_t.values()) < (1.0 - GROW) * sum(after.values()):
-            fx, cost, after, told = found[0], found[1], after_t, [more[0][0]]
-    return name, fx, cost, after, None, told
+        total_t, after_t = hold(found[0])
+        if total_t < (1.0 - GROW) * total:
+            fx, cost, after, total, told = found[0], found[1], after_t, total_t, [more[0][0]]
+    return fx, cost, after, told
 
 
 def told_by_holdout(name: str, fx_narrow: dict, cost_narrow: float, more: list, fit_of, hold_of):
@@ -976,5 +999,5 @@ __all__ = [
     "PAIR_EVALUATIONS", "PAIR_ALWAYS", "GROW_EVALUATIONS", "GROW", "FRICTION_GAIN", "RTOL", "sealing", "seal_told",
     "FIT_RTOL", "errors", "mean_errors", "fit_cost", "Candidate", "fit_effects", "Attribution",
     "fit_with_load", "fit_stribeck", "fit_seal_laws", "may_start_processes", "baseline_spread",
-    "attribute", "set_name", "told_by_holdout", "PAIR_JOBS", "pair_combos", "simple_laws", "wider_laws", "law_of", "fit_pair_jointly",
+    "attribute", "set_name", "told_by_holdout", "fit_laws", "PAIR_JOBS", "pair_combos", "simple_laws", "wider_laws", "law_of", "fit_pair_jointly",
 ]

@@ -47,10 +47,12 @@ stage's (stribeck_friction, pressure_friction, each law), with the joint's load
 re-identified with the effect on (``joint_load.fit_load_effect``), then the load (the
 baseline's as each candidate's) refined by the load cut's own output error on the fit
 recordings (:func:`joint_load.refine_load`).  Every law of an
-effect is fitted as ``attribute`` fits the boom's: each law screened over the catalogue's
-bounds and refined (a bounded scalar search, or Nelder-Mead for several parameters), the
-best kept, a law that holds its parameters and more grown from its fit where it lowers
-the fit error by ``SCREEN`` (``attribute.fit_effects`` on the cut's error).
+effect is fitted by the boom's own law fit (``attribute.fit_laws``, ``attribute.fit_effects``
+on the cut's error): each law screened over the catalogue's bounds and refined (a
+bounded scalar search, or Nelder-Mead for several parameters), the best kept; a law that
+holds its parameters and more grown from its fit, kept where it fits better and the
+holdouts bear it out; a further parameter the fit cuts cannot tell, told by the
+holdouts (the candidate says so: ``Fitted.told``, ``holdout_told`` in the report).
 
 **Pairs.**  On a cut where the best single effect removes less than ``MIN_SHRINK`` of
 the gap or leaves more than the noise margin, pairs among its ``PAIR_POOL`` best singles
@@ -78,9 +80,8 @@ from ..model import EFFECTS, Boom, Model, measure
 from ..model.boom import measurement_lag
 from ..model.catalogue import capped
 from ..physics import linkage as exc
-from .attribute import (ABS_FLOOR, CANDIDATES, FORMS, GROW, GROW_EVALUATIONS, MIN_SHRINK, MIN_SHRINK_SECOND,
-                        NOISE_FACTOR, PAIR_POOL, SCREEN, _map, _pays, fit_effects, fit_pair_jointly, law_of,
-                        simple_laws, wider_laws)
+from .attribute import (ABS_FLOOR, CANDIDATES, FORMS, MIN_SHRINK, MIN_SHRINK_SECOND, NOISE_FACTOR, PAIR_POOL,
+                        _map, _pays, fit_effects, fit_laws, fit_pair_jointly, law_of)
 from .localise import simulate_pneumatics
 
 #: the catalogue's stages that act inside one joint's pneumatics (the pneumatic cut)
@@ -222,6 +223,7 @@ class Fitted:
     shrink: float                #: 1 - mean(hold_gaps) / the holdouts' mean gap before
     values: dict | None = None   #: the joint's load re-identified with it (a friction effect)
     not_fitted: str | None = None  #: why it could not be fitted (then no shrink)
+    told: list = field(default_factory=list)   #: its parameters the holdouts told (``attribute.told_by_holdout``): no held-out figure for them
 
     @property
     def names(self) -> list[str]:
@@ -349,28 +351,21 @@ def _hold_gaps(joint, ex, effects, hold_cuts, others) -> list:
 
 
 def _fit_single(job):
-    """One effect of the pneumatic cut on one joint, every law (as ``attribute`` fits the
-    boom's): each simple law screened and refined, the best kept; a wider law grown from
-    its fit, kept where it lowers the fit error by ``SCREEN`` of it (a further parameter
-    pays for itself)."""
+    """One effect of the pneumatic cut on one joint, every law, as the boom's whole model
+    fits it (``attribute.fit_laws``: each simple law screened and refined, the best kept;
+    a wider law grown from its fit where the fit cuts and the holdouts bear it out; a
+    further parameter the fit cuts cannot tell, told by the holdouts).  Returns
+    ``(name, effects, fit gap, holdout gaps, told)``."""
     joint, name, ex, fit_cuts, hold_cuts, base, others = job
     cost_of = lambda effects: _mean_gap(fit_cuts, joint, ex, effects)
-    forms = joint_forms(name, joint, ex)
-    simple = simple_laws(forms)
-    # each simple law screened and refined (not only the best screened: a leak's orifice
-    # law has a narrow valley the screen's few points step over), the best kept
-    fits = [(*fit_effects([name], {}, None, forms={name: f}, baseline_cost=base, cost_of=cost_of), f)
-            for f in simple]
-    fx, cost, form = min(fits, key=lambda s: s[1])
-    if cost <= (1.0 - GROW) * base:      # (an effect that barely shows cannot tell its law's shape)
-        for wider, more in wider_laws(forms, form):
-            held, _ = fit_effects([name], {}, None, fixed={name: fx[name]}, forms={name: more},
-                                      screen_only=True, cost_of=cost_of)
-            fx_w, cost_w = fit_effects([name], {}, None, start=held, forms={name: wider},
-                                           max_evaluations=GROW_EVALUATIONS, cost_of=cost_of)
-            if cost_w < (1.0 - SCREEN) * cost:
-                fx, cost = fx_w, cost_w
-    return name, fx, cost, _hold_gaps(joint, ex, fx, hold_cuts, others)
+
+    def hold(effects):
+        gaps = _hold_gaps(joint, ex, effects, hold_cuts, others)
+        return float(np.mean(gaps)), gaps
+    fx, cost, gaps, told = fit_laws(name, joint_forms(name, joint, ex),
+                                    lambda **kw: fit_effects([name], {}, None, cost_of=cost_of, **kw), hold, base,
+                                    refine_each=True, told_costs=(cost_of, lambda e: hold(e)[0]))
+    return name, fx, cost, gaps, told
 
 
 def _fit_pair(job):
@@ -405,8 +400,10 @@ def _fit_load(job):
 
 def _fit_job(job):
     if job[0] == "position":
-        return _fit_load(job)
-    return (*_fit_single(job[1:]), None)
+        out = _fit_load(job)
+        return out if isinstance(out, str) else (*out, [])
+    name, fx, cost, gaps, told = _fit_single(job[1:])
+    return name, fx, cost, gaps, None, told
 
 
 def _job_cost(job) -> float:
@@ -628,8 +625,8 @@ def diagnose_joints(fit, hold, ex: exc.Excavator = exc.Excavator(), joints=exc.J
         if isinstance(out, str):
             cut.candidates.append(Fitted(job[2], {}, math.nan, [], 0.0, not_fitted=out))
             continue
-        name, fx, cost, gaps, values = out
-        cut.candidates.append(Fitted(name, fx, cost, gaps, _shrink(cut.gaps, gaps), values=values))
+        name, fx, cost, gaps, values, told = out
+        cut.candidates.append(Fitted(name, fx, cost, gaps, _shrink(cut.gaps, gaps), values=values, told=told))
     for joint, f in findings.items():
         for c in f.cuts:
             c.candidates.sort(key=lambda k: (k.not_fitted is not None, -k.shrink))

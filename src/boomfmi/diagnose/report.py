@@ -688,6 +688,8 @@ def _joint_effect(joint: str, cut, c, named: bool) -> dict:
         entry["values"] = c.values
     if c.not_fitted is not None:
         entry["not_fitted"] = c.not_fitted
+    if c.told:
+        entry["holdout_told"] = list(c.told)
     return entry
 
 
@@ -769,7 +771,9 @@ def _joints_html(doc: dict, figures) -> str:
     effects = "".join(
         f"<tr><td>{e(c['joint'])}</td><td>{e(c['cut'])}</td><td>{e(c['name'])}{' (named)' if c['named'] else ''}</td>"
         + (f"<td colspan=\"5\">not fitted: {e(c['not_fitted'])}</td></tr>" if c.get("not_fitted") else
-           f"<td>{_params_text(c['name'].replace('+', ' + '), c['params'])}</td>"
+           f"<td>{_params_text(c['name'].replace('+', ' + '), c['params'])}"
+           + (f" ({e(', '.join(c['holdout_told']))}: told by the holdout, which the fit recordings cannot tell; "
+              "the shrink is not held out for it)" if c.get("holdout_told") else "") + "</td>"
            f"<td>{_pct(c['fit_gap_before'])} &rarr; {_pct(c['fit_gap'])}</td>"
            f"<td>{_pct(c['gap_before'])}</td><td>{_pct(c['gap_after'])}</td><td>{c['shrink']:.3f}</td></tr>")
         for c in doc["effects"]) or \
