@@ -166,10 +166,15 @@ def test_a_200_ms_stall_engages_the_fail_safe_exactly_then(fmu, rig, tmp_path):
     after = rec[rec["t"] > last]
     fs = after[after["failsafe"] == 1]
     assert len(fs) > 0
-    assert 0.045 <= fs["t"].iloc[0] - last <= 0.056          # watchdog: 50 ms after the last command
     assert (fs["u"] == 5.0).all()                              # valve centred while in fail-safe
-    assert 0.13 <= len(fs) * 1e-3 <= 0.17                      # until commands resume, ~150 ms
-    assert rec["failsafe"].iloc[-1] == 0
+    # the stall's episode: the first run of fail-safe samples (the free-running rig's
+    # watchdog also engages wherever this test's own process stalls 50 ms on a busy host)
+    flags = after["failsafe"].to_numpy()
+    first = int(np.argmax(flags == 1))
+    n = int(np.argmax(flags[first:] == 0))
+    assert n > 0, "commands resumed and the fail-safe was never released"
+    assert 0.045 <= after["t"].iloc[first] - last <= 0.056    # watchdog: 50 ms after the last command
+    assert 0.13 <= n * 1e-3 <= 0.17                            # until commands resume, ~150 ms
 
 
 def test_a_real_time_bridge_paces_to_the_wall_clock_with_one_exchange_per_step(fmu, rig):
