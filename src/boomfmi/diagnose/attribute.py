@@ -317,7 +317,7 @@ def _fit_and_score(args):
 
 
 def fit_laws(name: str, forms: list, fit, hold, base_cost: float, fixed: dict | None = None,
-             refine_each: bool = False, told_costs=None):
+             refine_each: bool = False, *, told_costs):
     """Effect ``name`` fitted over its laws ``forms`` (``_laws``: [[(parameter, lower,
     upper, log)]]) and scored on the holdouts: the boom's whole model and a joint's cut
     of the excavator alike.  ``fit(**options) -> (effects, cost)`` is
