@@ -241,28 +241,40 @@ def reflected_force(f_est, f_prev, dt, gain, f_max, rate_max):
 # within the set consistent with the sample that best fits the sliding joints'
 # equations, its last value and the guess (``consistent_tip_force``).
 
+def _joint_terms(x, v, a, drive, ex: exc.Excavator, payload: float):
+    """What the joints' force balances start from at one sample: the pistons' positions
+    (clipped to the strokes) and velocities, their net known forces ``drive - (M_x a +
+    bias)`` [N], the levers ``lam`` and the friction scale (the boom's ``cos(phi)``):
+    ``(x, v, net, lam, scale)``."""
+    x = np.clip(np.asarray(x, float), 0.0, ex.strokes)
+    v = np.asarray(v, float)
+    Mx, bias, lam = exc.piston_dynamics(x, v, payload, ex)
+    net = np.asarray(drive, float) - (Mx @ np.asarray(a, float) + bias)
+    return x, v, net, lam, exc.friction_scale(x, ex)
+
+
 def observed_joint_torques(x, v, a, drive, ex: exc.Excavator = exc.Excavator(), payload: float = 0.0,
-                           v_rest: float = 2e-3, x_stop: float = 5e-4, sliding=None, x_measured=None):
+                           v_rest: float = 2e-3, x_stop: float = 5e-4, sliding=None, x_measured=None,
+                           terms=None):
     """The joint torques [N m] the environment exerts (``J^T f_tip`` if all of it is at
     the tip), from the pistons' position ``x`` [m], velocity ``v`` [m/s], acceleration
     ``a`` [m/s^2] and the pneumatic forces ``drive`` [N] (4-vectors):
     :func:`observed_joint_forces` through the linkage (``v_rest``, ``x_stop``,
     ``sliding`` and ``x_measured`` are its) times each cylinder's lever.  Returns
-    arrays ``(tau, resting, at_stop)``."""
-    x = np.clip(np.asarray(x, float), 0.0, ex.strokes)
-    v = np.asarray(v, float)
-    Mx, bias, lam = exc.piston_dynamics(x, v, payload, ex)
-    net = np.asarray(drive, float) - (Mx @ np.asarray(a, float) + bias)
+    arrays ``(tau, resting, at_stop)``.  ``terms``: :func:`_joint_terms` of these
+    arguments, where the caller has them (``observer_step``: once a sample)."""
+    x, v, net, lam, scale = terms if terms is not None else _joint_terms(x, v, a, drive, ex, payload)
     f, resting, at_stop = observed_joint_forces(net, x, v, ex.strokes, [(c.K_v, c.F_s, c.F_d) for c in ex.actuators],
-                                                exc.friction_scale(x, ex), v_rest, x_stop, sliding, x_measured)
+                                                scale, v_rest, x_stop, sliding, x_measured)
     return -np.asarray(f) / lam, np.asarray(resting), np.asarray(at_stop)
 
 
-def tip_force_from_torques(q, tau, weights=None, ex: exc.Excavator = exc.Excavator()):
+def tip_force_from_torques(q, tau, weights=None, ex: exc.Excavator = exc.Excavator(), JT=None):
     """The tip force [N] (world frame) whose ``J(q)^T f`` best matches the joint torques
     ``tau`` [N m] (weighted least squares, ``weights`` per joint, default 1), and the
-    residual ``|J^T f - tau|`` [N m] (unweighted) of the four equations."""
-    JT = exc.tip_jacobian(q, ex).T
+    residual ``|J^T f - tau|`` [N m] (unweighted) of the four equations.  ``JT``:
+    ``J(q)^T``, where the caller has it."""
+    JT = exc.tip_jacobian(q, ex).T if JT is None else JT
     tau = np.asarray(tau, float)
     w = np.ones(4) if weights is None else np.asarray(weights, float)
     f, *_ = np.linalg.lstsq(JT * w[:, None], tau * w, rcond=None)
@@ -283,7 +295,7 @@ def informative_joints(x, v, ex: exc.Excavator = exc.Excavator(), v_info: float 
 
 
 def tip_force_determined(q, tau, informative, ex: exc.Excavator = exc.Excavator(), sv_min: float = 0.05,
-                         miss_max: float = 0.1):
+                         miss_max: float = 0.1, JT=None):
     """The tip force [N] from the informative joints' torques alone, ``nan`` for every
     world component they do not determine ("cannot tell", instead of a guess).
 
@@ -294,13 +306,14 @@ def tip_force_determined(q, tau, informative, ex: exc.Excavator = exc.Excavator(
     felt directions: the swing alone feels the lateral force, so with the swing resting
     or on its stop a force along world x or y is undetermined wherever the upper
     structure is turned (x = r cos(theta) - t sin(theta)); with fewer than three joints
-    sliding no component may be.  Returns ``(f, known)`` (``known``: bool per axis)."""
+    sliding no component may be.  Returns ``(f, known)`` (``known``: bool per axis).
+    ``JT``: ``J(q)^T``, where the caller has it."""
     info = np.asarray(informative, bool)
     f = np.full(3, np.nan)
     known = np.zeros(3, bool)
     if not info.any():
         return f, known
-    A = exc.tip_jacobian(q, ex).T[info]
+    A = (exc.tip_jacobian(q, ex).T if JT is None else JT)[info]
     _, s, vt = np.linalg.svd(A, full_matrices=False)
     r = int(np.sum(s >= sv_min))
     if r == 0:
@@ -375,7 +388,7 @@ _BC, _AC, _AB = (_PAIR_OF[_TRIPLES[:, i], _TRIPLES[:, j]] for i, j in ((1, 2), (
 
 
 def joint_force_bands(x, v, a, drive, sliding, at_lower, at_upper, ex: exc.Excavator = exc.Excavator(),
-                      payload: float = 0.0, band=BAND_SLIDE):
+                      payload: float = 0.0, band=BAND_SLIDE, terms=None):
     """Per joint, the interval ``(lo, hi)`` [N m] of ``(J^T f_tip)_i`` consistent with one
     sample within the tolerance ``band`` [N on the piston, one for all or per joint]:
     a sliding joint (``sliding`` -1 or +1) the sliding law's value +-``band``; any other
@@ -385,12 +398,9 @@ def joint_force_bands(x, v, a, drive, sliding, at_lower, at_upper, ex: exc.Excav
     to the sliding law's value at ``v`` as well: a piston that still runs at speed
     ``v`` a millimetre before its stop carries its viscous force ``K_v v``, which no
     static band holds; a joint pressed on its lower stop (``at_lower``) no
-    lower bound, on its upper (``at_upper``) no upper bound (``-inf`` / ``inf``)."""
-    x = np.clip(np.asarray(x, float), 0.0, ex.strokes)
-    v = np.asarray(v, float)
-    Mx, bias, lam = exc.piston_dynamics(x, v, payload, ex)
-    net = np.asarray(drive, float) - (Mx @ np.asarray(a, float) + bias)
-    scale = exc.friction_scale(x, ex)
+    lower bound, on its upper (``at_upper``) no upper bound (``-inf`` / ``inf``).
+    ``terms``: :func:`_joint_terms` of ``x``, ``v``, ``a``, ``drive``, where the caller has them."""
+    x, v, net, lam, scale = terms if terms is not None else _joint_terms(x, v, a, drive, ex, payload)
     band = np.broadcast_to(np.asarray(band, float), (4,))
     sliding = np.asarray(sliding, float)
     lo, hi = np.empty(4), np.empty(4)
@@ -407,11 +417,12 @@ def joint_force_bands(x, v, a, drive, sliding, at_lower, at_upper, ex: exc.Excav
     return lo / lam, hi / lam
 
 
-def _tip_force_set(q, tau_lo, tau_hi, ex: exc.Excavator, f_bound: float):
+def _tip_force_set(q, tau_lo, tau_hi, ex: exc.Excavator, f_bound: float, JT=None):
     """The set of tip forces ``tau_lo <= J(q)^T f <= tau_hi``, ``|f_k| <= f_bound`` as
     ``(A, b, vertices)``: ``A f <= b`` (14 rows: the joints' upper and lower sides, an
-    open side as a far plane, and the box) and its vertices (m, 3), none where empty."""
-    JT = exc.tip_jacobian(q, ex).T
+    open side as a far plane, and the box) and its vertices (m, 3), none where empty.
+    ``JT``: ``J(q)^T``, where the caller has it."""
+    JT = exc.tip_jacobian(q, ex).T if JT is None else JT
     A = np.vstack([JT, -JT, np.eye(3), -np.eye(3)])
     big = 1e3 * f_bound * max(1.0, float(np.max(np.abs(JT))))
     b = np.concatenate([np.minimum(np.asarray(tau_hi, float), big), np.minimum(-np.asarray(tau_lo, float), big),
@@ -641,21 +652,24 @@ def observer_step(state: dict, angles, p_a, p_b, dt: float, omega, ex: exc.Excav
     # arriving at a stop is decelerating (its impact couples into the others' rows)
     arriving = np.abs(v_slow) > V_ARRIVAL
     moving = (np.abs(v_both) > v_info) & (arriving | informative_joints(xm, v_both, ex, v_info, x_stop=5e-4))
-    tau, resting, at_stop = observed_joint_torques(x_mid, np.where(moving, v_mean, 0.0),
-                                                   np.where(moving, a_mean, 0.0), F_mid, ex, payload, 0.0,
-                                                   sliding=np.where(info, np.sign(v_slow), 0.0), x_measured=xm)
+    v_obs, a_obs = np.where(moving, v_mean, 0.0), np.where(moving, a_mean, 0.0)
+    terms = _joint_terms(x_mid, v_obs, a_obs, F_mid, ex, payload)    # (the torques' and the bands' alike)
+    tau, resting, at_stop = observed_joint_torques(x_mid, v_obs, a_obs, F_mid, ex, payload, 0.0,
+                                                   sliding=np.where(info, np.sign(v_slow), 0.0), x_measured=xm,
+                                                   terms=terms)
     q = exc.joint_angles(np.clip(x_mid, 0.0, ex.strokes), ex)
+    JT = exc.tip_jacobian(q, ex).T
     w = np.where(at_stop, stop_weight, np.where(resting, rest_weight, 1.0))
-    f, residual = tip_force_from_torques(q, tau, w, ex)
-    f_det, _ = tip_force_determined(q, tau, info, ex)
+    f, residual = tip_force_from_torques(q, tau, w, ex, JT=JT)
+    f_det, _ = tip_force_determined(q, tau, info, ex, JT=JT)
     band = (np.asarray(band_slide, float) * np.array([a.F_s for a in ex.actuators])
             + band_rate * np.abs(dF_new) * 2.0 / omega)
     sliding_dir = np.where(info & (np.abs(v_both) > V_SLIDE_BOUNDS), np.sign(v_slow), 0.0)
     xl, xu = np.minimum(x_mid, xm), np.maximum(x_mid, xm)
     for widen in (1.0, 4.0, 16.0):
-        t_lo, t_hi = joint_force_bands(x_mid, np.where(moving, v_mean, 0.0), np.where(moving, a_mean, 0.0), F_mid,
-                                       sliding_dir, xl <= 5e-4, xu >= ex.strokes - 5e-4, ex, payload, widen * band)
-        A, b, verts = _tip_force_set(q, t_lo, t_hi, ex, f_bound)
+        t_lo, t_hi = joint_force_bands(x_mid, v_obs, a_obs, F_mid, sliding_dir, xl <= 5e-4, xu >= ex.strokes - 5e-4,
+                                       ex, payload, widen * band, terms=terms)
+        A, b, verts = _tip_force_set(q, t_lo, t_hi, ex, f_bound, JT=JT)
         if len(verts):
             break
     lever = np.abs(exc.lever_arms(np.clip(x_mid, 0.0, ex.strokes), ex))
