@@ -180,7 +180,7 @@ def test_flows_and_slopes_at_once_are_the_two_functions_to_the_bit():
     gives exactly chamber_flows and chamber_flow_slopes on one state: supply and exhaust
     ports, closed, half-open and fully open valves, choked, subsonic and laminar ratios,
     flow reversed (a chamber above the supply or below the exhaust); and the seal's leak
-    likewise (leakage_orifice_flow_and_slopes); on arrays, the same two functions."""
+    likewise (leakage_orifice_flow_and_slopes against the orifice's flow and slopes); on arrays, the same two functions."""
     rng = np.random.default_rng(3)
     v, g = ph.Valve(), ph.Gas()
     near = lambda p: p * (1.0 + rng.uniform(-2e-3, 2e-3))          # the laminar band about a port
@@ -194,8 +194,9 @@ def test_flows_and_slopes_at_once_are_the_two_functions_to_the_bit():
         assert both == (*ph.chamber_flows(u, p_a, p_b, v, g), *ph.chamber_flow_slopes(u, p_a, p_b, v, g)), (u, p_a, p_b)
         for A in (0.0, 3e-8):
             leak = ph.effects.leakage_orifice_flow_and_slopes(p_a, p_b, A, g)
-            assert leak == (ph.effects.leakage_orifice_flow(p_a, p_b, A, g),
-                            *ph.effects.leakage_orifice_slopes(p_a, p_b, A, g)), (p_a, p_b, A)
+            slopes = ((ph.signed_mass_flow_slope(A, p_b, p_a, g), ph.signed_mass_flow_slope(A, p_a, p_b, g))
+                      if A > 0.0 else (0.0, 0.0))        # d/dp_a of B -> A, d/dp_b of A -> B
+            assert leak == (ph.effects.leakage_orifice_flow(p_a, p_b, A, g), *slopes), (p_a, p_b, A)
     u, p_a, p_b = (np.array(c, float) for c in zip(*states))
     m_a, m_b, s_a, s_b = ph.chamber_flows_and_slopes(u, p_a, p_b, v, g)
     np.testing.assert_array_equal(np.stack([m_a, m_b]), np.stack(ph.chamber_flows(u, p_a, p_b, v, g)))

@@ -52,7 +52,8 @@ import numpy as np
 
 from .. import physics as ph
 from ..physics import linkage as exc
-from .fit import Estimate, FitResult, REACH, block_bootstrap, motion, scaled_lstsq, static_friction, _widened
+from .fit import (Estimate, FitResult, REACH, block_bootstrap, column_scale, motion, scaled_lstsq, static_friction,
+                  _widened)
 from .preprocess import CUTOFF, JointData, Prepared, lowpass, prepare_machine
 
 JOINTS = exc.JOINTS
@@ -139,7 +140,7 @@ def equation_error(data: list[list[JointData]], n_boot: int = 200, block: float 
     est["payload"] = Estimate(float(theta[8]), (float(min(lo[8], theta[8]) - floor),
                                                 float(max(hi[8], theta[8]) + floor)), "kg")
     res = y - X @ theta
-    return est, {"samples": len(y), "condition_number": float(np.linalg.cond(Xw / np.abs(Xw).max(axis=0))),
+    return est, {"samples": len(y), "condition_number": float(np.linalg.cond(Xw / column_scale(Xw))),
                  "rms_residual_N": {j: float(np.sqrt(np.mean(res[joint == i] ** 2))) for i, j in enumerate(JOINTS)}}
 
 

@@ -138,18 +138,10 @@ def leakage_orifice_flow(p_a: float, p_b: float, A: float, gas: Gas = Gas()) -> 
     return float(signed_mass_flow(A, p_a, p_b, gas))
 
 
-def leakage_orifice_slopes(p_a: float, p_b: float, A: float, gas: Gas = Gas()) -> tuple[float, float]:
-    """d/dp_a of chamber A's leak inflow and d/dp_b of chamber B's [kg/(s Pa)], both
-    <= 0: what the exponential integrator needs for :func:`leakage_orifice_flow`."""
-    if A <= 0.0:
-        return 0.0, 0.0
-    return float(signed_mass_flow_slope(A, p_b, p_a, gas)), float(signed_mass_flow_slope(A, p_a, p_b, gas))
-
-
 def leakage_orifice_flow_and_slopes(p_a: float, p_b: float, A: float, gas: Gas = Gas()) -> tuple[float, float, float]:
-    """:func:`leakage_orifice_flow` and :func:`leakage_orifice_slopes` at once: ``(leak
-    A to B [kg/s], d/dp_a of A's inflow, d/dp_b of B's [kg/(s Pa)])``, each orifice
-    evaluated once (``orifice.signed_mass_flow_and_slope``)."""
+    """:func:`leakage_orifice_flow` and its slopes: ``(leak A to B [kg/s], d/dp_a of A's
+    inflow, d/dp_b of B's [kg/(s Pa)])``, both slopes <= 0 (what the exponential
+    integrator needs), each orifice evaluated once (``orifice.signed_mass_flow_and_slope``)."""
     if A <= 0.0:
         return 0.0, 0.0, 0.0
     leak, g_b = signed_mass_flow_and_slope(A, p_a, p_b, gas)
@@ -339,7 +331,7 @@ def sensor_lag_step(measured: float, true: float, dt: float, tau: float) -> floa
 __all__ = [
     "spool_lag_step", "spool_rate", "deadband_command", "thermal_relaxation_step", "thermal_relaxation_rate",
     "outflow_temperature_rate", "chamber_wall_area", "thermal_time_constant", "leakage_flow",
-    "leakage_orifice_flow", "leakage_orifice_slopes", "leakage_orifice_flow_and_slopes", "stribeck_weight", "stribeck_level",
+    "leakage_orifice_flow", "leakage_orifice_flow_and_slopes", "stribeck_weight", "stribeck_level",
     "stribeck_load", "seal_pressure", "pressure_friction_load", "cushion_engagement",
     "cushion_engagement_slope", "check_cushion_port", "cushion_port_cut", "cushion_flow",
     "cushion_flow_slope", "sensor_lag_step",

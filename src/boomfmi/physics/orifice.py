@@ -40,6 +40,14 @@ def _subsonic_root(r, k):
     return xp.sqrt(xp.maximum(r ** (2.0 / k) - r ** ((k + 1.0) / k), 0.0))
 
 
+def _subsonic_slope(r, k, C, root):
+    """d/dr of the subsonic branch's flow per area and upstream pressure, ``C`` times
+    :func:`_subsonic_root` (its value ``root`` at ``r``): d/dr sqrt(g(r)) = g'(r) /
+    (2 sqrt(g)), g = r^(2/k) - r^((k+1)/k)."""
+    g_prime = (2.0 / k) * r ** (2.0 / k - 1.0) - ((k + 1.0) / k) * r ** (1.0 / k)
+    return C * g_prime / (2.0 * xp.maximum(root, 1e-300))
+
+
 @lru_cache(maxsize=64)
 def _constants(k: float, R: float, T: float):
     """(P_cr, subsonic coefficient, choked flow per area and pressure, laminar slope) for
@@ -87,10 +95,7 @@ def mass_flow_slope(A, P_u, P_d, gas: Gas = Gas()):
     P_cr, C, _, laminar_slope = _constants(*gas)
     r = xp.clip(P_d / P_u, 0.0, 1.0)
     rs = xp.minimum(r, R_LAMINAR)
-    root = _subsonic_root(rs, k)
-    # d/dr sqrt(g(r)) = g'(r) / (2 sqrt(g)),  g = r^(2/k) - r^((k+1)/k)
-    g_prime = (2.0 / k) * rs ** (2.0 / k - 1.0) - ((k + 1.0) / k) * rs ** (1.0 / k)
-    d_subsonic = C * g_prime / (2.0 * xp.maximum(root, 1e-300))
+    d_subsonic = _subsonic_slope(rs, k, C, _subsonic_root(rs, k))
     d_laminar = -laminar_slope
     d_dr = xp.where(r >= P_cr, xp.where(r > R_LAMINAR, d_laminar, d_subsonic), 0.0)
     return A * d_dr        # A P_u d/dr * dr/dP_d, with dr/dP_d = 1 / P_u
@@ -137,26 +142,23 @@ def signed_mass_flow_slope(A, P_1, P_2, gas: Gas = Gas()):
 def signed_mass_flow_and_slope(A, P_1, P_2, gas: Gas = Gas()):
     """``(signed_mass_flow, signed_mass_flow_slope)`` at once [kg/s, kg/(s Pa)]: the flow
     from side 1 into side 2 and its slope in ``P_2`` (the valve's local linearisation
-    that a chamber integrates against).  On one state (floats) the pressure ratio and
-    the branch are found once and only the branch taken is evaluated, with the same
-    operations as the two functions (the same values to the bit); on arrays, the two
-    functions."""
+    that a chamber integrates against).  On one state (floats) the flow by
+    :func:`mass_flow`'s own one-branch path and the slope of only the branch taken, with
+    the same operations as the two functions (the same values to the bit); on arrays,
+    the two functions."""
     if not (type(A) in xp.SCALARS and type(P_1) in xp.SCALARS and type(P_2) in xp.SCALARS):
         return signed_mass_flow(A, P_1, P_2, gas), signed_mass_flow_slope(A, P_1, P_2, gas)
     forward = P_1 >= P_2
     P_u, P_d = (P_1, P_2) if forward else (P_2, P_1)
-    k = gas.k
-    P_cr, C, choked, laminar_slope = _constants(*gas)
+    m = mass_flow(A, P_u, P_d, gas)
+    P_cr, C, _, laminar_slope = _constants(*gas)
     r = xp.clip(P_d / P_u, 0.0, 1.0)
     if not r >= P_cr:
-        m, slope_d = A * P_u * choked, A * 0.0
+        slope_d = A * 0.0
     elif r > R_LAMINAR:
-        m, slope_d = A * P_u * (laminar_slope * (1.0 - r)), A * -laminar_slope
+        slope_d = A * -laminar_slope
     else:
-        root = _subsonic_root(r, k)
-        m = A * P_u * (C * root)
-        g_prime = (2.0 / k) * r ** (2.0 / k - 1.0) - ((k + 1.0) / k) * r ** (1.0 / k)
-        slope_d = A * (C * g_prime / (2.0 * xp.maximum(root, 1e-300)))
+        slope_d = A * _subsonic_slope(r, gas.k, C, _subsonic_root(r, gas.k))
     if forward:
         return m, slope_d
     return -m, -(m / P_u - slope_d * P_d / P_u)
